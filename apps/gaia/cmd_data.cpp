@@ -1,0 +1,151 @@
+// gaia data info|stats|split: look at a dataset, its balancing, and its geofenced validation split.
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include <nlohmann/json.hpp>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/data/balance.h"
+#include "gaia/data/clip_sampler.h"
+#include "gaia/data/geofence.h"
+#include "gaia/eval/svg_plot.h"
+
+namespace gaia::app {
+
+namespace {
+
+std::vector<size_t> all_episodes(const data::Dataset& ds) {
+  std::vector<size_t> v(ds.size());
+  for (size_t i = 0; i < v.size(); ++i) v[i] = i;
+  return v;
+}
+
+std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= s.size()) {
+    size_t c = s.find(',', start);
+    if (c == std::string::npos) c = s.size();
+    if (c > start) out.push_back(s.substr(start, c - start));
+    start = c + 1;
+  }
+  return out;
+}
+
+void info(const std::string& root, const Config& c) {
+  data::Dataset ds(root);
+  std::printf("dataset %s: %zu episodes\n", root.c_str(), ds.size());
+  std::printf("%-28s %7s %7s %8s %9s %6s %6s %-9s %-6s %s\n", "episode", "frames", "fps", "seconds", "size",
+              "speed", "curv", "weather", "time", "lat,lon");
+  int64_t frames = 0;
+  double seconds = 0;
+  for (size_t i = 0; i < ds.size(); ++i) {
+    data::Episode ep = ds.episode(i);
+    const auto& m = ep.meta();
+    int sp = 0, cu = 0;
+    for (int64_t f = 0; f < ep.size(); ++f) {
+      sp += !std::isnan(ep.speed(f));
+      cu += !std::isnan(ep.curvature(f));
+    }
+    double dur = ep.size() > 1 ? ep.time_s(ep.size() - 1) - ep.time_s(0) + 1.0 / m.fps : 1.0 / m.fps;
+    frames += ep.size();
+    seconds += dur;
+    std::printf("%-28s %7lld %7.3g %8.2f %4dx%-4d %5.0f%% %5.0f%% %-9s %-6s %s\n", m.id.c_str(), (long long)ep.size(),
+                m.fps, dur, m.height, m.width, 100.0 * sp / double(ep.size()), 100.0 * cu / double(ep.size()),
+                m.weather.empty() ? "-" : m.weather.c_str(), m.time_of_day.empty() ? "-" : m.time_of_day.c_str(),
+                m.has_location() ? fmt::format("{:.4f},{:.4f}", m.latitude, m.longitude).c_str() : "-");
+  }
+  auto clips = data::enumerate_clips(ds, all_episodes(ds), c.world.context_steps, c.data.world_fps,
+                                     c.world.context_steps / c.data.world_fps);
+  std::printf("total: %lld frames, %.1f s; %zu non-overlapping world-model clips of T=%d steps at %.4g Hz\n",
+              (long long)frames, seconds, clips.size(), c.world.context_steps, c.data.world_fps);
+}
+
+}  // namespace
+
+void register_data(CLI::App& app) {
+  auto* data_cmd = app.add_subcommand("data", "inspect datasets: info, balancing statistics, geofenced split");
+  data_cmd->require_subcommand(1);
+
+  {
+    auto* cmd = data_cmd->add_subcommand("info", "episodes, frames, signals coverage and clip count");
+    auto flags = std::make_shared<SharedFlags>();
+    auto root = std::make_shared<std::string>();
+    cmd->add_option("DATASET", *root, "dataset directory")->required();
+    add_shared_flags(cmd, flags.get(), "unused");
+    cmd->callback([=] { info(*root, resolve_config(*flags)); });
+  }
+
+  {
+    auto* cmd = data_cmd->add_subcommand("stats", "empirical vs balanced-sampled histograms (paper §3), as text and SVG");
+    auto flags = std::make_shared<SharedFlags>();
+    auto root = std::make_shared<std::string>();
+    auto features = std::make_shared<std::string>("weather,speed,curvature");
+    auto exponent = std::make_shared<double>(-1);
+    cmd->add_option("DATASET", *root, "dataset directory")->required();
+    cmd->add_option("--balance", *features, "comma-separated features: " + fmt::format("{}", fmt::join(data::known_features(), ", ")));
+    cmd->add_option("--exponent", *exponent, "balancing exponent in [0, 1] (default: config data.balance_exponent)");
+    add_shared_flags(cmd, flags.get(), "directory for balance.svg and balance.json (default: DATASET)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      data::Dataset ds(*root);
+      if (ds.size() == 0) fail("{}: dataset has no episodes", *root);
+      double ex = *exponent >= 0 ? *exponent : c.data.balance_exponent;
+      data::Balancer bal(split_list(*features), ex, c.data.balance_bins);
+      // One example per world-model clip (T steps at the world rate), as training samples them.
+      auto clips = data::enumerate_clips(ds, all_episodes(ds), c.world.context_steps, c.data.world_fps, 1.0);
+      if (clips.empty()) fail("{}: no episode is long enough for a clip of {} steps at {} Hz", *root, c.world.context_steps, c.data.world_fps);
+      std::vector<data::FeatureRow> rows;
+      size_t cur = SIZE_MAX;
+      std::unique_ptr<data::Episode> ep;
+      for (auto& clip : clips) {
+        if (clip.episode != cur) { ep = std::make_unique<data::Episode>(ds.episode(clip.episode)); cur = clip.episode; }
+        rows.push_back(data::clip_features(*ep, clip.frames));
+      }
+      bal.fit(rows);
+      std::printf("%zu clips, exponent %.2f, acceptance rate %.1f%%\n", rows.size(), ex, 100 * bal.acceptance_rate(rows));
+      std::vector<std::string> charts;
+      nlohmann::json out = nlohmann::json::object();
+      for (auto& f : bal.features()) {
+        auto h = bal.histogram(f, rows);
+        std::printf("\n%s\n  %-24s %10s %10s\n", f.c_str(), "bin", "empirical", "sampled");
+        for (size_t i = 0; i < h.bins.size(); ++i)
+          std::printf("  %-24s %9.1f%% %9.1f%%\n", h.bins[i].c_str(), 100 * h.empirical[i], 100 * h.sampled[i]);
+        charts.push_back(eval::svg_bars(fmt::format("{} (exponent {:.2f})", f, ex), h.bins,
+                                        {{"empirical", h.empirical, ""}, {"sampled", h.sampled, ""}}));
+        out[f] = {{"bins", h.bins}, {"empirical", h.empirical}, {"sampled", h.sampled}};
+      }
+      fs::path dir = flags->out.empty() ? fs::path(*root) : fs::path(flags->out);
+      write_file_atomic(dir / "balance.svg", eval::svg_stack(charts));
+      write_file_atomic(dir / "balance.json", out.dump(2) + "\n");
+      std::printf("\nwrote %s and %s\n", (dir / "balance.svg").c_str(), (dir / "balance.json").c_str());
+    });
+  }
+
+  {
+    auto* cmd = data_cmd->add_subcommand("split", "geofenced validation split (paper §3) written as JSON");
+    auto flags = std::make_shared<SharedFlags>();
+    auto root = std::make_shared<std::string>();
+    auto boxes = std::make_shared<std::vector<std::string>>();
+    auto frac = std::make_shared<double>(0.0);
+    cmd->add_option("DATASET", *root, "dataset directory")->required();
+    cmd->add_option("--geofence", *boxes, "strict validation box lat_min,lon_min,lat_max,lon_max (repeatable)");
+    cmd->add_option("--val-fraction", *frac, "fraction of the other episodes held out at random");
+    add_shared_flags(cmd, flags.get(), "split JSON file (default: DATASET/split.json)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      data::Dataset ds(*root);
+      std::vector<data::GeoBox> gb;
+      for (auto& b : *boxes) gb.push_back(data::parse_geobox(b));
+      auto s = data::geofence_split(ds, gb, *frac, c.run.seed);
+      fs::path out = flags->out.empty() ? fs::path(*root) / "split.json" : fs::path(flags->out);
+      write_file_atomic(out, s.to_json().dump(2) + "\n");
+      std::printf("train %zu, validation %zu inside geofences + %zu random -> %s\n", s.train.size(),
+                  s.val_geofence.size(), s.val_random.size(), out.c_str());
+    });
+  }
+}
+
+}  // namespace gaia::app

@@ -1,0 +1,42 @@
+// gaia plan CONFIG: parameter counts, FLOPs per token, memory and sequence length of a configuration.
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "common.h"
+#include "gaia/plan/plan.h"
+
+namespace gaia::app {
+
+void register_plan(CLI::App& app) {
+  auto* cmd = app.add_subcommand("plan", "parameters, FLOPs per token (6N), memory and sequence length of a config");
+  auto flags = std::make_shared<SharedFlags>();
+  auto positional = std::make_shared<std::string>();
+  cmd->add_option("CONFIG", *positional, "config YAML (same as --config)");
+  add_shared_flags(cmd, flags.get(), "unused");
+  auto json = std::make_shared<bool>(false);
+  cmd->add_flag("--json", *json, "print the plan as JSON");
+  cmd->callback([=] {
+    SharedFlags f = *flags;
+    if (!positional->empty()) f.config = *positional;
+    Config c = resolve_config(f);
+    plan::Plan p = plan::make_plan(c);
+    if (*json) {
+      nlohmann::json j = {{"config", c.name},
+                          {"tokenizer_params", p.tokenizer.total},
+                          {"discriminator_params", p.discriminator},
+                          {"world_params", p.world.total},
+                          {"world_non_embedding_params", p.world.non_embedding},
+                          {"decoder_params", p.decoder.total},
+                          {"image_tokens", p.image_tokens},
+                          {"sequence_length", p.sequence_length},
+                          {"bit_compression", p.bit_compression},
+                          {"world_flops_per_token", p.world_flops_per_token}};
+      std::printf("%s\n", j.dump(2).c_str());
+    } else {
+      std::fputs(plan::format_plan(p, c).c_str(), stdout);
+    }
+  });
+}
+
+}  // namespace gaia::app

@@ -1,0 +1,36 @@
+#include "common.h"
+
+#include <regex>
+
+#include <opencv2/core.hpp>
+
+#include "gaia/core/error.h"
+
+namespace gaia::app {
+
+void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help) {
+  cmd->add_option("--config", f->config, "YAML config (configs/tiny.yaml, default.yaml, paper.yaml); default: built-in default");
+  cmd->add_option("--set", f->sets, "override a config key, e.g. --set world.d_model=512 (repeatable)");
+  cmd->add_option("--device", f->device, "cpu | cuda | cuda:N (default: config run.device)");
+  cmd->add_option("--threads", f->threads, "CPU threads (0 = all cores)");
+  cmd->add_option("--seed", f->seed, "random seed (default: config run.seed)");
+  cmd->add_option("--out", f->out, out_help);
+}
+
+Config resolve_config(const SharedFlags& f) {
+  Config c = f.config.empty() ? Config{} : Config::load(f.config);
+  for (auto& kv : f.sets) c.set(kv);
+  if (!f.device.empty()) c.run.device = f.device;
+  if (f.threads >= 0) c.run.threads = f.threads;
+  if (f.seed >= 0) c.run.seed = static_cast<uint64_t>(f.seed);
+  static const std::regex dev_re("cpu|cuda(:[0-9]+)?");
+  if (!std::regex_match(c.run.device, dev_re)) fail("--device '{}': expected cpu, cuda or cuda:N", c.run.device);
+  c.validate();
+  return c;
+}
+
+void apply_threads(const Config& c) {
+  if (c.run.threads > 0) cv::setNumThreads(c.run.threads);
+}
+
+}  // namespace gaia::app

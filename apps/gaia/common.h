@@ -1,0 +1,36 @@
+#pragma once
+// Shared command-line plumbing: every subcommand takes the same run flags and resolves one Config from them.
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "gaia/core/config.h"
+
+namespace gaia::app {
+
+struct SharedFlags {
+  std::string config;               // --config FILE (default: built-in defaults = configs/default.yaml)
+  std::vector<std::string> sets;    // --set key=value (repeatable)
+  std::string device;               // --device cpu|cuda|cuda:N
+  int threads = -1;                 // --threads N
+  long long seed = -1;              // --seed N
+  std::string out;                  // --out DIR or FILE
+};
+
+// Adds --config/--set/--device/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
+void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory");
+
+// Config from --config (or defaults), then --set overrides, then --device/--threads/--seed; validated.
+Config resolve_config(const SharedFlags& f);
+
+// Applies run.threads to the process (OpenCV; LibTorch when linked).
+void apply_threads(const Config& c);
+
+// Registration of the subcommands (one file each).
+void register_plan(CLI::App& app);
+void register_demo(CLI::App& app);
+void register_ingest(CLI::App& app);
+void register_data(CLI::App& app);
+
+}  // namespace gaia::app

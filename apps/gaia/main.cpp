@@ -1,0 +1,29 @@
+// gaia: a C++ implementation of GAIA-1 (Hu et al. 2023), a generative world model for autonomous driving.
+// One binary with git-style subcommands; each file cmd_*.cpp registers one of them.
+#include <cstdio>
+#include <exception>
+
+#include "common.h"
+#include "gaia/core/error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"gaia: generative world model for autonomous driving (GAIA-1 in C++)", "gaia"};
+  app.set_version_flag("--version", std::string("gaia ") + GAIA_VERSION);
+  app.require_subcommand(1);
+  gaia::app::register_demo(app);
+  gaia::app::register_plan(app);
+  gaia::app::register_ingest(app);
+  gaia::app::register_data(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const gaia::Error& e) {
+    std::fprintf(stderr, "gaia: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "gaia: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

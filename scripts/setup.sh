@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Installs everything gaia needs from Debian 12 packages. Idempotent: a second run installs nothing.
+set -euo pipefail
+
+PKGS=(
+  build-essential cmake ninja-build ccache pkg-config
+  libtorch-dev                 # LibTorch 1.13 (CPU); find_package(Torch)
+  libopencv-dev                # image / video I/O (FFmpeg backend)
+  ffmpeg                       # video codecs used by OpenCV's FFmpeg backend
+  libcli11-dev                 # command-line parsing
+  libyaml-cpp-dev              # configs
+  nlohmann-json3-dev           # safetensors headers, JSONL metrics
+  libfmt-dev libspdlog-dev     # formatting and logging
+  libgtest-dev libgmock-dev libbenchmark-dev
+  xz-utils zstd                # compressors used as floors in world-model evaluation
+)
+
+missing=()
+for p in "${PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  echo "setup: all packages present"
+fi

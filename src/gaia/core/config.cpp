@@ -1,0 +1,251 @@
+#include "gaia/core/config.h"
+
+#include <map>
+#include <sstream>
+
+#include <yaml-cpp/yaml.h>
+
+#include "gaia/core/error.h"
+
+namespace gaia {
+
+namespace {
+
+template <typename T> std::string type_name();
+template <> std::string type_name<int>() { return "int"; }
+template <> std::string type_name<uint64_t>() { return "uint"; }
+template <> std::string type_name<double>() { return "float"; }
+template <> std::string type_name<bool>() { return "bool"; }
+template <> std::string type_name<std::string>() { return "string"; }
+template <> std::string type_name<std::vector<int>>() { return "int list"; }
+template <> std::string type_name<std::vector<std::string>>() { return "string list"; }
+
+template <typename T> std::string emit(const T& v) {
+  YAML::Emitter e;
+  e << YAML::Flow << v;
+  return e.c_str();
+}
+
+template <typename T> Config::Field field(const std::string& key, T* p) {
+  Config::Field f;
+  f.key = key;
+  f.type = type_name<T>();
+  f.get = [p] { return emit(*p); };
+  f.set = [p, key](const std::string& text) {
+    try {
+      YAML::Node n = YAML::Load(text);
+      if (n.IsNull()) fail("config key '{}' has no value", key);
+      T v = n.as<T>();
+      if constexpr (std::is_same_v<T, double>) {
+        if (!(v == v)) fail("config key '{}' is NaN", key);
+      }
+      *p = v;
+    } catch (const YAML::Exception&) {
+      fail("config key '{}' expects {} but got '{}'", key, type_name<T>(), text);
+    }
+  };
+  return f;
+}
+
+void flatten(const YAML::Node& node, const std::string& prefix, std::vector<std::pair<std::string, YAML::Node>>* out) {
+  if (node.IsMap()) {
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      std::string k = it->first.as<std::string>();
+      flatten(it->second, prefix.empty() ? k : prefix + "." + k, out);
+    }
+  } else {
+    out->emplace_back(prefix, node);
+  }
+}
+
+}  // namespace
+
+std::vector<Config::Field> Config::fields() {
+  std::vector<Field> f;
+  f.push_back(field("name", &name));
+  auto& d = data;
+  f.push_back(field("data.height", &d.height));
+  f.push_back(field("data.width", &d.width));
+  f.push_back(field("data.native_fps", &d.native_fps));
+  f.push_back(field("data.world_fps", &d.world_fps));
+  f.push_back(field("data.balance_tokenizer", &d.balance_tokenizer));
+  f.push_back(field("data.balance_world", &d.balance_world));
+  f.push_back(field("data.balance_exponent", &d.balance_exponent));
+  f.push_back(field("data.balance_bins", &d.balance_bins));
+  auto& t = tokenizer;
+  f.push_back(field("tokenizer.downsample", &t.downsample));
+  f.push_back(field("tokenizer.codebook_size", &t.codebook_size));
+  f.push_back(field("tokenizer.code_dim", &t.code_dim));
+  f.push_back(field("tokenizer.channels", &t.channels));
+  f.push_back(field("tokenizer.channel_mult", &t.channel_mult));
+  f.push_back(field("tokenizer.res_blocks", &t.res_blocks));
+  f.push_back(field("tokenizer.z_channels", &t.z_channels));
+  f.push_back(field("tokenizer.disc_channels", &t.disc_channels));
+  f.push_back(field("tokenizer.disc_layers", &t.disc_layers));
+  f.push_back(field("tokenizer.w_l1", &t.w_l1));
+  f.push_back(field("tokenizer.w_l2", &t.w_l2));
+  f.push_back(field("tokenizer.w_perceptual", &t.w_perceptual));
+  f.push_back(field("tokenizer.w_gan", &t.w_gan));
+  f.push_back(field("tokenizer.w_codebook", &t.w_codebook));
+  f.push_back(field("tokenizer.w_dino", &t.w_dino));
+  f.push_back(field("tokenizer.commitment", &t.commitment));
+  f.push_back(field("tokenizer.disc_start", &t.disc_start));
+  f.push_back(field("tokenizer.lr", &t.lr));
+  f.push_back(field("tokenizer.weight_decay", &t.weight_decay));
+  f.push_back(field("tokenizer.beta1", &t.beta1));
+  f.push_back(field("tokenizer.beta2", &t.beta2));
+  f.push_back(field("tokenizer.final_lr", &t.final_lr));
+  f.push_back(field("tokenizer.warmup_steps", &t.warmup_steps));
+  f.push_back(field("tokenizer.steps", &t.steps));
+  f.push_back(field("tokenizer.batch_size", &t.batch_size));
+  auto& w = world;
+  f.push_back(field("world.d_model", &w.d_model));
+  f.push_back(field("world.n_layers", &w.n_layers));
+  f.push_back(field("world.n_heads", &w.n_heads));
+  f.push_back(field("world.context_steps", &w.context_steps));
+  f.push_back(field("world.text_tokens", &w.text_tokens));
+  f.push_back(field("world.text_dim", &w.text_dim));
+  f.push_back(field("world.text_vocab", &w.text_vocab));
+  f.push_back(field("world.action_tokens", &w.action_tokens));
+  f.push_back(field("world.dropout", &w.dropout));
+  f.push_back(field("world.p_uncond", &w.p_uncond));
+  f.push_back(field("world.p_action", &w.p_action));
+  f.push_back(field("world.p_text", &w.p_text));
+  f.push_back(field("world.lr", &w.lr));
+  f.push_back(field("world.weight_decay", &w.weight_decay));
+  f.push_back(field("world.beta1", &w.beta1));
+  f.push_back(field("world.beta2", &w.beta2));
+  f.push_back(field("world.grad_clip", &w.grad_clip));
+  f.push_back(field("world.final_lr_ratio", &w.final_lr_ratio));
+  f.push_back(field("world.warmup_steps", &w.warmup_steps));
+  f.push_back(field("world.steps", &w.steps));
+  f.push_back(field("world.batch_size", &w.batch_size));
+  f.push_back(field("world.activation_checkpointing", &w.activation_checkpointing));
+  f.push_back(field("world.top_k", &w.top_k));
+  f.push_back(field("world.temperature", &w.temperature));
+  f.push_back(field("world.guidance_scale", &w.guidance_scale));
+  auto& v = decoder;
+  f.push_back(field("decoder.channels", &v.channels));
+  f.push_back(field("decoder.channel_mult", &v.channel_mult));
+  f.push_back(field("decoder.res_blocks", &v.res_blocks));
+  f.push_back(field("decoder.attn_levels", &v.attn_levels));
+  f.push_back(field("decoder.heads", &v.heads));
+  f.push_back(field("decoder.token_embed_dim", &v.token_embed_dim));
+  f.push_back(field("decoder.frames", &v.frames));
+  f.push_back(field("decoder.token_dropout", &v.token_dropout));
+  f.push_back(field("decoder.ddim_steps", &v.ddim_steps));
+  f.push_back(field("decoder.mix_probability", &v.mix_probability));
+  f.push_back(field("decoder.mix_weight", &v.mix_weight));
+  f.push_back(field("decoder.w_l1", &v.w_l1));
+  f.push_back(field("decoder.w_l2", &v.w_l2));
+  f.push_back(field("decoder.ema_decay", &v.ema_decay));
+  f.push_back(field("decoder.lr", &v.lr));
+  f.push_back(field("decoder.weight_decay", &v.weight_decay));
+  f.push_back(field("decoder.beta1", &v.beta1));
+  f.push_back(field("decoder.beta2", &v.beta2));
+  f.push_back(field("decoder.grad_clip", &v.grad_clip));
+  f.push_back(field("decoder.final_lr", &v.final_lr));
+  f.push_back(field("decoder.warmup_steps", &v.warmup_steps));
+  f.push_back(field("decoder.steps", &v.steps));
+  f.push_back(field("decoder.batch_size", &v.batch_size));
+  f.push_back(field("run.device", &run.device));
+  f.push_back(field("run.threads", &run.threads));
+  f.push_back(field("run.seed", &run.seed));
+  f.push_back(field("run.checkpoint_every", &run.checkpoint_every));
+  return f;
+}
+
+void Config::apply_yaml(const std::string& text, const std::string& where) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    fail("{}:{}: YAML syntax error ({})", where, e.mark.line + 1, e.msg);
+  }
+  if (root.IsNull()) return;
+  if (!root.IsMap()) fail("{}: top level must be a mapping of config keys", where);
+  std::vector<std::pair<std::string, YAML::Node>> flat;
+  flatten(root, "", &flat);
+  auto fs_ = fields();
+  std::map<std::string, Field*> by_key;
+  for (auto& f : fs_) by_key[f.key] = &f;
+  for (auto& [key, node] : flat) {
+    auto it = by_key.find(key);
+    int line = node.Mark().line + 1;
+    if (it == by_key.end()) fail("{}:{}: unknown config key '{}'", where, line, key);
+    try {
+      it->second->set(YAML::Dump(node));
+    } catch (const Error& e) {
+      fail("{}:{}: {}", where, line, e.what());
+    }
+  }
+}
+
+Config Config::load(const fs::path& yaml) {
+  if (!fs::exists(yaml)) fail("{}: no such config file", yaml.string());
+  Config c;
+  c.apply_yaml(read_file(yaml), yaml.string());
+  c.validate();
+  return c;
+}
+
+void Config::set(const std::string& kv) {
+  auto eq = kv.find('=');
+  if (eq == std::string::npos) fail("--set '{}': expected key=value", kv);
+  std::string key = kv.substr(0, eq), value = kv.substr(eq + 1);
+  for (auto& f : fields())
+    if (f.key == key) {
+      try {
+        f.set(value);
+      } catch (const Error& e) {
+        fail("--set {}: {}", kv, e.what());
+      }
+      return;
+    }
+  fail("--set: unknown config key '{}'", key);
+}
+
+void Config::validate() const {
+  auto need = [&](bool ok, const std::string& msg) {
+    if (!ok) fail("config '{}': {}", name, msg);
+  };
+  need(data.height > 0 && data.width > 0, "data.height and data.width must be positive");
+  need(tokenizer.downsample > 0 && (tokenizer.downsample & (tokenizer.downsample - 1)) == 0,
+       "tokenizer.downsample must be a power of two");
+  need(data.height % tokenizer.downsample == 0 && data.width % tokenizer.downsample == 0,
+       "tokenizer.downsample must divide data.height and data.width");
+  int levels = 0;
+  for (int d = tokenizer.downsample; d > 1; d /= 2) ++levels;
+  need(static_cast<int>(tokenizer.channel_mult.size()) == levels + 1,
+       fmt::format("tokenizer.channel_mult needs log2(downsample) + 1 = {} entries", levels + 1));
+  need(tokenizer.codebook_size >= 2, "tokenizer.codebook_size must be >= 2");
+  need(world.d_model % world.n_heads == 0, "world.d_model must be divisible by world.n_heads");
+  need(world.action_tokens == 2, "world.action_tokens must be 2 (speed, curvature; paper §2.1)");
+  need(world.context_steps >= 1 && world.text_tokens >= 0, "world.context_steps >= 1 and world.text_tokens >= 0");
+  double p = world.p_uncond + world.p_action + world.p_text;
+  need(p > 0.999 && p < 1.001, "world.p_uncond + p_action + p_text must be 1");
+  need(data.balance_exponent >= 0 && data.balance_exponent <= 1, "data.balance_exponent must be in [0, 1]");
+  need(data.native_fps > 0 && data.world_fps > 0 && data.world_fps <= data.native_fps,
+       "data.world_fps must be in (0, data.native_fps]");
+  need(decoder.frames >= 3, "decoder.frames must be >= 3");
+  need(decoder.channel_mult.size() >= 1, "decoder.channel_mult must not be empty");
+}
+
+std::string Config::to_yaml() {
+  // Keys are at most two levels deep ("section.key"), so the YAML is written directly.
+  std::string out, section;
+  for (auto& f : fields()) {
+    auto dot = f.key.find('.');
+    if (dot == std::string::npos) {
+      out += f.key + ": " + f.get() + "\n";
+      continue;
+    }
+    std::string s = f.key.substr(0, dot);
+    if (s != section) out += s + ":\n";
+    section = s;
+    out += "  " + f.key.substr(dot + 1) + ": " + f.get() + "\n";
+  }
+  return out;
+}
+
+}  // namespace gaia

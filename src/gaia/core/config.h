@@ -1,0 +1,121 @@
+#pragma once
+// The one configuration of a gaia run, loaded from YAML (configs/*.yaml) plus --set key=value overrides.
+// Every field is registered once (Config::visit) with its dotted key and a comment; loading, overrides,
+// dumping and "unknown key" errors all go through that list, so a key cannot be half-supported.
+// Defaults are the CPU-sized default config; configs/paper.yaml holds the paper's values (§4).
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "gaia/core/fs.h"
+
+namespace gaia {
+
+struct DataConfig {
+  int height = 72;               // paper §4.1: 288 (default is 4x smaller for the CPU)
+  int width = 128;               // paper §4.1: 512 (9/16 ratio)
+  double native_fps = 25.0;      // paper §3: data at 25 Hz
+  double world_fps = 6.25;       // paper §2.3: world model runs at 6.25 Hz
+  std::vector<std::string> balance_tokenizer{"latitude", "longitude", "weather"};  // paper §3
+  std::vector<std::string> balance_world{"latitude", "longitude", "weather", "steering", "speed"};  // paper §3
+  double balance_exponent = 0.5;  // paper §3: 0 = empirical, 1 = uniform; 0.5 used for all features
+  int balance_bins = 10;          // bins for continuous features
+};
+
+struct TokenizerConfig {
+  int downsample = 8;            // D; paper §4.1: D = 16
+  int codebook_size = 1024;      // K; paper §4.1: K = 8192
+  int code_dim = 32;             // low-dimensional code space (Yu et al. 2022 factorised codes)
+  int channels = 64;             // base width of the encoder/decoder
+  std::vector<int> channel_mult{1, 2, 2, 4};  // one entry per resolution level; log2(D) downsamplings
+  int res_blocks = 2;            // ResNet blocks per level
+  int z_channels = 256;          // width at the bottleneck before the code projection
+  int disc_channels = 64;        // PatchGAN discriminator width
+  int disc_layers = 3;
+  // paper §4.1 loss weights
+  double w_l1 = 0.2, w_l2 = 2.0, w_perceptual = 0.1, w_gan = 1.0, w_codebook = 1.0, w_dino = 0.1;
+  double commitment = 0.25;      // van den Oord et al. beta
+  int disc_start = 2000;         // GAN loss switched on after this many steps
+  // paper §4.1 optimiser: AdamW lr 1e-4, wd 0.01, betas (0.5, 0.9); 5k warm-up, cosine to 1e-5
+  double lr = 1e-4, weight_decay = 0.01, beta1 = 0.5, beta2 = 0.9, final_lr = 1e-5;
+  int warmup_steps = 500, steps = 20000, batch_size = 16;
+};
+
+struct WorldConfig {
+  int d_model = 256;             // d; paper §2.1: d = 4096
+  int n_layers = 6;              // paper-scale 6.5B implies 32 layers at d = 4096 (12 d^2 per layer)
+  int n_heads = 8;
+  int context_steps = 8;         // T; paper §4.2: T = 26 steps at 6.25 Hz (4 s)
+  int text_tokens = 4;           // m; paper §2.1: m = 32 T5-large tokens per step
+  int text_dim = 128;            // width of text embeddings fed to the linear layer (T5-large: 1024)
+  int text_vocab = 2048;         // built-in word vocabulary size
+  int action_tokens = 2;         // l; paper §2.1: speed and curvature
+  double dropout = 0.0;
+  // paper §4.2 conditioning mix: unconditional / action / text = 20% / 40% / 40%
+  double p_uncond = 0.2, p_action = 0.4, p_text = 0.4;
+  // paper §4.2 optimiser: AdamW lr 1e-4, wd 0.1, betas (0.9, 0.95), clip 1.0; 2.5k warm-up, cosine to lr/10
+  double lr = 1e-4, weight_decay = 0.1, beta1 = 0.9, beta2 = 0.95, grad_clip = 1.0, final_lr_ratio = 0.1;
+  int warmup_steps = 250, steps = 10000, batch_size = 8;
+  bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
+  int top_k = 50;                // paper §5.1 Fig. 5: top-k = 50
+  double temperature = 1.0;
+  double guidance_scale = 0.0;   // s in l = (1 + s) l_cond - s l_uncond (paper eq. 2)
+};
+
+struct DecoderConfig {
+  int channels = 64;             // base width of the 3D U-Net
+  std::vector<int> channel_mult{1, 2, 4};
+  int res_blocks = 1;
+  std::vector<int> attn_levels{2};  // levels (0 = full resolution) that get spatial attention
+  int heads = 4;
+  int token_embed_dim = 64;      // conditioning token embedding width
+  int frames = 7;                // T'; paper §4.3: T' = 7
+  double token_dropout = 0.15;   // paper §2.4: p = 0.15
+  int ddim_steps = 50;           // paper §5.2: 50 DDIM steps
+  double mix_probability = 0.25, mix_weight = 0.5;  // paper §5.2 image/video eps mixing
+  double w_l1 = 0.1, w_l2 = 1.0;  // paper §4.3
+  double ema_decay = 0.999;      // paper §4.3
+  // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6
+  double lr = 5e-5, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.99, grad_clip = 1.0, final_lr = 1e-6;
+  int warmup_steps = 250, steps = 10000, batch_size = 4;
+};
+
+struct RunConfig {
+  std::string device = "cpu";    // cpu | cuda | cuda:N
+  int threads = 0;               // 0 = all cores
+  uint64_t seed = 0;
+  int checkpoint_every = 200;    // steps between checkpoints (resumable training)
+};
+
+struct Config {
+  std::string name = "default";
+  DataConfig data;
+  TokenizerConfig tokenizer;
+  WorldConfig world;
+  DecoderConfig decoder;
+  RunConfig run;
+
+  // Derived quantities (paper §2.1, §4.2)
+  int tokens_h() const { return data.height / tokenizer.downsample; }
+  int tokens_w() const { return data.width / tokenizer.downsample; }
+  int image_tokens() const { return tokens_h() * tokens_w(); }  // n; paper: 18 x 32 = 576
+  int step_tokens() const { return world.text_tokens + image_tokens() + world.action_tokens; }  // m + n + l = 610
+  int64_t sequence_length() const { return int64_t(world.context_steps) * step_tokens(); }  // paper: 15860
+
+  // Registry: each field with its dotted key ("world.d_model").
+  struct Field {
+    std::string key, type;
+    std::function<std::string()> get;            // YAML text of the value
+    std::function<void(const std::string&)> set;  // parses YAML text; throws gaia::Error on bad values
+  };
+  std::vector<Field> fields();
+
+  static Config load(const fs::path& yaml);        // unknown keys -> "FILE: unknown config key 'a.b'"
+  void apply_yaml(const std::string& text, const std::string& where);
+  void set(const std::string& key_eq_value);        // --set world.d_model=512
+  void validate() const;                            // cross-field checks (D divides H, W; ...)
+  std::string to_yaml();
+};
+
+}  // namespace gaia

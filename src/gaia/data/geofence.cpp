@@ -1,0 +1,66 @@
+#include "gaia/data/geofence.h"
+
+#include <random>
+
+#include "gaia/core/error.h"
+#include "gaia/data/signals.h"
+
+namespace gaia::data {
+
+GeoBox parse_geobox(const std::string& s) {
+  auto cells = split_csv_line(s);
+  if (cells.size() != 4) fail("--geofence '{}': expected lat_min,lon_min,lat_max,lon_max", s);
+  double v[4];
+  for (int i = 0; i < 4; ++i) {
+    try {
+      size_t used;
+      v[i] = std::stod(cells[static_cast<size_t>(i)], &used);
+      if (used != cells[static_cast<size_t>(i)].size()) throw std::invalid_argument("x");
+    } catch (const std::exception&) {
+      fail("--geofence '{}': '{}' is not a number", s, cells[static_cast<size_t>(i)]);
+    }
+  }
+  GeoBox b{v[0], v[1], v[2], v[3]};
+  if (!(b.lat_min < b.lat_max && b.lon_min < b.lon_max)) fail("--geofence '{}': min must be below max", s);
+  return b;
+}
+
+nlohmann::json Split::to_json() const {
+  return {{"train", train}, {"val_geofence", val_geofence}, {"val_random", val_random}};
+}
+
+Split Split::from_json(const nlohmann::json& j, const std::string& where) {
+  Split s;
+  try {
+    s.train = j.at("train").get<std::vector<std::string>>();
+    s.val_geofence = j.at("val_geofence").get<std::vector<std::string>>();
+    s.val_random = j.at("val_random").get<std::vector<std::string>>();
+  } catch (const nlohmann::json::exception& e) {
+    fail("{}: bad split file ({})", where, e.what());
+  }
+  return s;
+}
+
+Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double frac, uint64_t seed) {
+  if (!(frac >= 0 && frac < 1)) fail("validation fraction must be in [0, 1), got {}", frac);
+  Split s;
+  for (size_t i = 0; i < ds.size(); ++i) {
+    EpisodeMeta m = ds.meta(i);
+    bool fenced = false;
+    if (m.has_location())
+      for (auto& b : strict) fenced = fenced || b.contains(m.latitude, m.longitude);
+    if (fenced) {
+      s.val_geofence.push_back(m.id);
+      continue;
+    }
+    // Hash of (seed, id): the decision for an episode does not change when others are added.
+    uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
+    for (unsigned char c : m.id) h = (h ^ c) * 1099511628211ull;
+    std::mt19937_64 rng(seed ^ h);
+    if (std::uniform_real_distribution<double>(0, 1)(rng) < frac) s.val_random.push_back(m.id);
+    else s.train.push_back(m.id);
+  }
+  return s;
+}
+
+}  // namespace gaia::data

@@ -1,0 +1,32 @@
+#pragma once
+// Geofenced validation split (paper §3): episodes inside a strict geofence are validation-only (roads never seen
+// in training); a random selection of the remaining episodes can be held out as well.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/data/episode.h"
+
+namespace gaia::data {
+
+struct GeoBox {
+  double lat_min = 0, lon_min = 0, lat_max = 0, lon_max = 0;
+  bool contains(double lat, double lon) const {
+    return lat >= lat_min && lat <= lat_max && lon >= lon_min && lon <= lon_max;
+  }
+};
+
+GeoBox parse_geobox(const std::string& s);  // "lat_min,lon_min,lat_max,lon_max"
+
+struct Split {
+  std::vector<std::string> train, val_geofence, val_random;
+  nlohmann::json to_json() const;
+  static Split from_json(const nlohmann::json& j, const std::string& where);
+};
+
+// Episodes without a location are never geofenced; random hold-out is seeded and independent of order.
+Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
+
+}  // namespace gaia::data

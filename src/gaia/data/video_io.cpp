@@ -1,0 +1,110 @@
+#include "gaia/data/video_io.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "gaia/core/error.h"
+
+namespace gaia::data {
+
+namespace {
+bool is_image(const fs::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), ::tolower);
+  return e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".bmp";
+}
+
+cv::Mat to_bgr(const cv::Mat& m) {
+  if (m.channels() == 3) return m;
+  cv::Mat out;
+  cv::cvtColor(m, out, m.channels() == 4 ? cv::COLOR_BGRA2BGR : cv::COLOR_GRAY2BGR);
+  return out;
+}
+}  // namespace
+
+VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path) {
+  if (!fs::exists(path)) fail("{}: no such file or directory", path.string());
+  if (fs::is_directory(path)) {
+    for (auto& e : fs::directory_iterator(path))
+      if (e.is_regular_file() && is_image(e.path())) images_.push_back(e.path());
+    std::sort(images_.begin(), images_.end());
+    if (images_.empty()) fail("{}: directory holds no PNG/JPEG frames", path.string());
+    if (!(fps_override > 0)) fail("{}: an image directory needs its frame rate (--fps)", path.string());
+    fps_ = fps_override;
+    count_hint_ = static_cast<int64_t>(images_.size());
+    cv::Mat first = cv::imread(images_[0].string(), cv::IMREAD_UNCHANGED);
+    if (first.empty()) fail("{}: cannot decode image", images_[0].string());
+    width_ = first.cols;
+    height_ = first.rows;
+    return;
+  }
+  cap_ = std::make_unique<cv::VideoCapture>(path.string(), cv::CAP_FFMPEG);
+  if (!cap_->isOpened()) fail("{}: cannot open video (not a format FFmpeg decodes, or corrupt)", path.string());
+  double fps = cap_->get(cv::CAP_PROP_FPS);
+  fps_ = fps_override > 0 ? fps_override : fps;
+  if (!(fps_ > 0) || fps_ > 1000) fail("{}: video reports no usable frame rate; pass --fps", path.string());
+  count_hint_ = static_cast<int64_t>(cap_->get(cv::CAP_PROP_FRAME_COUNT));
+  width_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_WIDTH));
+  height_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_HEIGHT));
+}
+
+VideoSource::~VideoSource() = default;
+
+bool VideoSource::next(VideoFrame* out) {
+  if (!cap_) {
+    if (next_image_ >= images_.size()) return false;
+    const fs::path& p = images_[next_image_++];
+    cv::Mat m = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+    if (m.empty()) fail("{}: cannot decode image", p.string());
+    if (m.depth() != CV_8U) m.convertTo(m, CV_8U, 1.0 / 256);
+    out->bgr = to_bgr(m);
+    out->time_s = static_cast<double>(index_++) / fps_;
+    return true;
+  }
+  cv::Mat m;
+  if (!cap_->read(m) || m.empty()) return false;
+  out->bgr = to_bgr(m);
+  // Container timestamps keep variable-rate footage honest; fall back to index / fps when they are absent
+  // or not increasing (some containers report 0 for every frame).
+  double t = cap_->get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+  double fallback = static_cast<double>(index_) / fps_;
+  if (!(t > last_time_) || !std::isfinite(t)) t = fallback;
+  if (index_ == 0 && t > 0 && t < 1.0 / fps_) t = 0;  // a few containers start at a small offset
+  out->time_s = t;
+  last_time_ = t;
+  ++index_;
+  return true;
+}
+
+cv::Mat resize_center_crop(const cv::Mat& bgr, int height, int width) {
+  if (bgr.empty()) fail("resize_center_crop: empty image");
+  double s = std::max(double(height) / bgr.rows, double(width) / bgr.cols);
+  int rh = std::max(height, static_cast<int>(std::lround(bgr.rows * s)));
+  int rw = std::max(width, static_cast<int>(std::lround(bgr.cols * s)));
+  cv::Mat resized;
+  cv::resize(bgr, resized, cv::Size(rw, rh), 0, 0, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+  int y = (rh - height) / 2, x = (rw - width) / 2;
+  return resized(cv::Rect(x, y, width, height)).clone();
+}
+
+void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, double fps) {
+  if (frames.empty()) fail("{}: no frames to write", path.string());
+  if (path.has_parent_path()) fs::create_directories(path.parent_path());
+  fs::path tmp = path.parent_path() / (".tmp-" + unique_suffix() + path.extension().string());
+  cv::Size size(frames[0].cols, frames[0].rows);
+  cv::VideoWriter w;
+  // H.264 first (plays everywhere); Debian's OpenCV/FFmpeg may lack an encoder, then MPEG-4 Part 2.
+  for (const char* cc : {"avc1", "H264", "mp4v"}) {
+    if (w.open(tmp.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), fps, size)) break;
+  }
+  if (!w.isOpened()) fail("{}: no video encoder available", path.string());
+  for (auto& f : frames) w.write(f);
+  w.release();
+  fs::rename(tmp, path);
+}
+
+}  // namespace gaia::data

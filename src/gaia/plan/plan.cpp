@@ -1,0 +1,202 @@
+#include "gaia/plan/plan.h"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+namespace gaia::plan {
+
+namespace {
+
+// Parameter counts of the building blocks (weights + biases), as constructed by the model code.
+int64_t conv(int64_t cin, int64_t cout, int64_t k) { return cin * cout * k * k + cout; }
+int64_t group_norm(int64_t c) { return 2 * c; }
+int64_t linear(int64_t in, int64_t out, bool bias = true) { return in * out + (bias ? out : 0); }
+int64_t layer_norm(int64_t d) { return 2 * d; }
+
+// ResNet block: GN, conv3x3, GN, conv3x3, 1x1 skip when widths differ; `emb` > 0 adds a FiLM projection
+// of the diffusion-time embedding (scale and shift).
+int64_t res_block(int64_t cin, int64_t cout, int64_t emb = 0) {
+  int64_t p = group_norm(cin) + conv(cin, cout, 3) + group_norm(cout) + conv(cout, cout, 3);
+  if (cin != cout) p += conv(cin, cout, 1);
+  if (emb > 0) p += linear(emb, 2 * cout);
+  return p;
+}
+
+// Multi-head self-attention over channels c with a GroupNorm in front (U-Net style).
+int64_t attention(int64_t c) { return group_norm(c) + linear(c, 3 * c) + linear(c, c); }
+
+}  // namespace
+
+ParamCount tokenizer_params(const Config& cfg) {
+  const auto& t = cfg.tokenizer;
+  const int L = static_cast<int>(t.channel_mult.size());
+  int64_t p = 0;
+  // Encoder: conv_in, per level res_blocks ResBlocks then a stride-2 conv (not after the last level),
+  // two middle ResBlocks, GN + conv_out to z_channels.
+  int64_t c = int64_t(t.channels) * t.channel_mult[0];
+  p += conv(3, c, 3);
+  for (int i = 0; i < L; ++i) {
+    int64_t co = int64_t(t.channels) * t.channel_mult[static_cast<size_t>(i)];
+    for (int r = 0; r < t.res_blocks; ++r) { p += res_block(c, co); c = co; }
+    if (i + 1 < L) p += conv(c, c, 3);
+  }
+  p += 2 * res_block(c, c) + group_norm(c) + conv(c, t.z_channels, 3);
+  // Quantiser (Yu et al. 2022): linear projection to code_dim, codebook K x code_dim, projection back.
+  int64_t codebook = int64_t(t.codebook_size) * t.code_dim;
+  p += linear(t.z_channels, t.code_dim) + codebook + linear(t.code_dim, t.z_channels);
+  // Decoder mirrors the encoder with res_blocks + 1 blocks per level and nearest-upsample + conv.
+  p += conv(t.z_channels, c, 3) + 2 * res_block(c, c);
+  for (int i = L - 1; i >= 0; --i) {
+    int64_t co = int64_t(t.channels) * t.channel_mult[static_cast<size_t>(i)];
+    for (int r = 0; r < t.res_blocks + 1; ++r) { p += res_block(c, co); c = co; }
+    if (i > 0) p += conv(c, c, 3);
+  }
+  p += group_norm(c) + conv(c, 3, 3);
+  ParamCount out;
+  out.total = p;
+  out.non_embedding = p - codebook;
+  return out;
+}
+
+int64_t discriminator_params(const Config& cfg) {
+  // PatchGAN (Isola et al.): conv4x4 3->C, then layers of conv4x4 doubling width (capped at 8C) with GN,
+  // and a final conv4x4 to one logit per patch.
+  const auto& t = cfg.tokenizer;
+  int64_t c = t.disc_channels, p = conv(3, c, 4);
+  for (int i = 1; i <= t.disc_layers; ++i) {
+    int64_t co = int64_t(t.disc_channels) * std::min(1 << i, 8);
+    p += (c * co * 16) + group_norm(co);  // convs before a norm carry no bias
+    c = co;
+  }
+  return p + conv(c, 1, 4);
+}
+
+ParamCount world_params(const Config& cfg) {
+  const auto& w = cfg.world;
+  const int64_t d = w.d_model, K = cfg.tokenizer.codebook_size;
+  const int64_t n = cfg.image_tokens(), m = w.text_tokens, l = w.action_tokens;
+  // Embeddings (paper §2.1): image token embedding, text linear layer (text_dim -> d), one linear layer per
+  // action scalar (1 -> d), learned null tokens for dropped text / actions, T temporal + (m + n + l) spatial.
+  int64_t emb = K * d + linear(w.text_dim, d) + l * linear(1, d) + (m + l) * d + int64_t(w.context_steps) * d +
+                (m + n + l) * d;
+  // Pre-LN GPT block: LN, causal self-attention (qkv + proj), LN, 4d MLP.
+  int64_t block = layer_norm(d) + linear(d, 3 * d) + linear(d, d) + layer_norm(d) + linear(d, 4 * d) + linear(4 * d, d);
+  int64_t body = w.n_layers * block + layer_norm(d);
+  int64_t head = linear(d, K, false);
+  ParamCount out;
+  out.non_embedding = body;  // Kaplan's N excludes embeddings (and the tied-size output head)
+  out.total = emb + body + head;
+  return out;
+}
+
+ParamCount decoder_params(const Config& cfg) {
+  const auto& v = cfg.decoder;
+  const int L = static_cast<int>(v.channel_mult.size());
+  const int64_t ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
+  auto has_attn = [&](int level) {
+    for (int a : v.attn_levels) if (a == level) return true;
+    return false;
+  };
+  // Factorised attention (Ho et al. 2022): spatial attention within a frame + temporal attention across
+  // frames, the latter with a relative-position bias table of 2T'-1 entries per head.
+  auto st_attn = [&](int64_t c) { return attention(c) + attention(c) + int64_t(2 * v.frames - 1) * v.heads; };
+  int64_t p = 0, token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the dropped-token embedding
+  p += token_embedding;
+  p += linear(ch, emb) + linear(emb, emb);  // diffusion-time MLP on a sinusoidal embedding
+  p += 3 * emb;                              // frame-rate embedding: 6.25 / 12.5 / 25 Hz
+  // Input: noisy frame (3) + clean context frame (3) + context mask (1) + upsampled token embedding (E).
+  int64_t c = ch * v.channel_mult[0];
+  p += conv(3 + 3 + 1 + E, c, 3);
+  std::vector<int64_t> skips{c};
+  for (int i = 0; i < L; ++i) {
+    int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
+    for (int r = 0; r < v.res_blocks; ++r) {
+      p += res_block(c, co, emb);
+      c = co;
+      if (has_attn(i)) p += st_attn(c);
+      skips.push_back(c);
+    }
+    if (i + 1 < L) { p += conv(c, c, 3); skips.push_back(c); }
+  }
+  p += res_block(c, c, emb) + st_attn(c) + res_block(c, c, emb);
+  for (int i = L - 1; i >= 0; --i) {
+    int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
+    for (int r = 0; r < v.res_blocks + 1; ++r) {
+      int64_t skip = skips.back();
+      skips.pop_back();
+      p += res_block(c + skip, co, emb);
+      c = co;
+      if (has_attn(i)) p += st_attn(c);
+    }
+    if (i > 0) p += conv(c, c, 3);
+  }
+  p += group_norm(c) + conv(c, 3, 3);
+  ParamCount out;
+  out.total = p;
+  out.non_embedding = p - token_embedding;
+  return out;
+}
+
+Plan make_plan(const Config& c) {
+  Plan p;
+  p.tokenizer = tokenizer_params(c);
+  p.discriminator = discriminator_params(c);
+  p.world = world_params(c);
+  p.decoder = decoder_params(c);
+  p.image_tokens = c.image_tokens();
+  p.sequence_length = c.sequence_length();
+  p.bit_compression = double(c.data.height) * c.data.width * 3 * 8 /
+                      (double(p.image_tokens) * std::log2(double(c.tokenizer.codebook_size)));
+  const double N = double(p.world.non_embedding), s = double(p.sequence_length), d = c.world.d_model;
+  const double L = c.world.n_layers;
+  p.world_flops_per_token = 6 * N;
+  p.world_flops_per_token_with_attn = 6 * N + 6 * L * s * d;
+  const double GB = 1e9;
+  p.world_weights_gb = 4.0 * p.world.total / GB;
+  p.world_train_state_gb = 16.0 * p.world.total / GB;
+  // Korthikanti et al. 2022: ~34 s d bytes per layer in 16-bit without the s^2 attention term (FlashAttention).
+  p.world_act_gb_per_seq = 34.0 * s * d * L / GB;
+  p.world_act_ckpt_gb_per_seq = (2.0 * s * d * L + 34.0 * s * d) / GB;
+  p.tokenizer_weights_gb = 4.0 * p.tokenizer.total / GB;
+  p.decoder_weights_gb = 4.0 * p.decoder.total / GB;
+  return p;
+}
+
+namespace {
+std::string human(double v) {
+  if (v >= 1e9) return fmt::format("{:.2f}B", v / 1e9);
+  if (v >= 1e6) return fmt::format("{:.2f}M", v / 1e6);
+  if (v >= 1e3) return fmt::format("{:.1f}K", v / 1e3);
+  return fmt::format("{:.0f}", v);
+}
+}  // namespace
+
+std::string format_plan(const Plan& p, const Config& c) {
+  std::string s;
+  s += fmt::format("config: {}   image {}x{}, D={}, K={}, n={} tokens/frame ({}x{})\n", c.name, c.data.height,
+                   c.data.width, c.tokenizer.downsample, c.tokenizer.codebook_size, p.image_tokens, c.tokens_h(),
+                   c.tokens_w());
+  s += fmt::format("\n{:<28}{:>14}{:>16}{:>14}\n", "component", "parameters", "non-embedding", "fp32 weights");
+  s += fmt::format("{:<28}{:>14}{:>16}{:>11.2f} GB\n", "image tokenizer (enc+dec)", human(p.tokenizer.total),
+                   human(p.tokenizer.non_embedding), p.tokenizer_weights_gb);
+  s += fmt::format("{:<28}{:>14}{:>16}{:>14}\n", "  discriminator (training)", human(p.discriminator), "", "");
+  s += fmt::format("{:<28}{:>14}{:>16}{:>11.2f} GB\n", "world model", human(p.world.total),
+                   human(p.world.non_embedding), p.world_weights_gb);
+  s += fmt::format("{:<28}{:>14}{:>16}{:>11.2f} GB\n", "video decoder (3D U-Net)", human(p.decoder.total),
+                   human(p.decoder.non_embedding), p.decoder_weights_gb);
+  s += fmt::format("\nworld model: d={}, layers={}, heads={}, T={} steps at {} Hz\n", c.world.d_model,
+                   c.world.n_layers, c.world.n_heads, c.world.context_steps, c.data.world_fps);
+  s += fmt::format("  sequence length  T (m + n + l) = {} x ({} + {} + {}) = {}\n", c.world.context_steps,
+                   c.world.text_tokens, p.image_tokens, c.world.action_tokens, p.sequence_length);
+  s += fmt::format("  FLOPs per token  6N = {:.3g}   (with attention 6N + 6Lsd = {:.3g})\n", p.world_flops_per_token,
+                   p.world_flops_per_token_with_attn);
+  s += fmt::format("  training state   {:.1f} GB (bf16 weights+grads, fp32 master+Adam m,v: 16 B/param)\n",
+                   p.world_train_state_gb);
+  s += fmt::format("  activations      {:.2f} GB/sequence (bf16, FlashAttention); {:.2f} GB with checkpointing\n",
+                   p.world_act_gb_per_seq, p.world_act_ckpt_gb_per_seq);
+  s += fmt::format("tokenizer bit compression  H W 3 8 / (n log2 K) = {:.1f}\n", p.bit_compression);
+  return s;
+}
+
+}  // namespace gaia::plan
