@@ -1,12 +1,15 @@
 // gaia: a C++ implementation of GAIA-1 (Hu et al. 2023), a generative world model for autonomous driving.
 // One binary with git-style subcommands; each file cmd_*.cpp registers one of them.
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 
 #include "common.h"
 #include "gaia/core/error.h"
 
 int main(int argc, char** argv) {
+  // FFmpeg's own log lines would break the "one clear error line" rule; our errors say what went wrong.
+  ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);
   CLI::App app{"gaia: generative world model for autonomous driving (GAIA-1 in C++)", "gaia"};
   app.set_version_flag("--version", std::string("gaia ") + GAIA_VERSION);
   app.require_subcommand(1);

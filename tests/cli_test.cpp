@@ -1,0 +1,108 @@
+// The gaia binary: help, exit codes, and one clear error line for each kind of bad input.
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "test_util.h"
+
+using namespace gaia;
+
+namespace {
+// Exactly one line that starts with "gaia: error:" and names `what`.
+void expect_one_error_line(const test::RunResult& r, const std::string& what) {
+  EXPECT_NE(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find(what), std::string::npos) << r.output;
+}
+
+fs::path make_video(const fs::path& dir, int n) {
+  fs::path p = dir / "drive.avi";
+  cv::VideoWriter vw(p.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25, cv::Size(128, 72));
+  for (int i = 0; i < n; ++i) {
+    cv::Mat f(72, 128, CV_8UC3, cv::Scalar(i * 2, 100, 50));
+    vw.write(f);
+  }
+  return p;
+}
+}  // namespace
+
+TEST(Cli, HelpForEverySubcommand) {
+  for (std::string sub : {"", "demo", "plan", "ingest", "data", "data stats", "data split", "data info"}) {
+    auto r = test::run_gaia(sub + " --help");
+    EXPECT_EQ(r.status, 0) << sub << r.output;
+    EXPECT_NE(r.output.find("Usage"), std::string::npos) << sub;
+  }
+  auto r = test::run_gaia("ingest --help");
+  for (auto flag : {"--config", "--set", "--device", "--threads", "--seed", "--out", "--signals", "--meta"})
+    EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
+}
+
+TEST(Cli, BadFlagsAndConfigsExitNonZero) {
+  test::TempDir dir;
+  EXPECT_NE(test::run_gaia("plan --frobnicate").status, 0);
+  EXPECT_NE(test::run_gaia("no-such-command").status, 0);
+  expect_one_error_line(test::run_gaia("plan '" + (dir / "missing.yaml").string() + "'"), "missing.yaml");
+  write_file_atomic(dir / "typo.yaml", "data:\n  hieght: 72\n");
+  expect_one_error_line(test::run_gaia("plan '" + (dir / "typo.yaml").string() + "'"), "data.hieght");
+  expect_one_error_line(test::run_gaia("plan --set world.d_modle=3"), "world.d_modle");
+  expect_one_error_line(test::run_gaia("plan --set data.height=nan"), "data.height");
+  expect_one_error_line(test::run_gaia("plan --device tpu"), "--device");
+}
+
+TEST(Cli, IngestErrorsLeaveNoOutput) {
+  test::TempDir dir;
+  fs::path ds = dir / "ds";
+  expect_one_error_line(test::run_gaia("ingest '" + (dir / "none.mp4").string() + "' --out '" + ds.string() + "'"), "none.mp4");
+  write_file_atomic(dir / "empty.mp4", "");
+  expect_one_error_line(test::run_gaia("ingest '" + (dir / "empty.mp4").string() + "' --out '" + ds.string() + "'"), "empty.mp4");
+  fs::path video = make_video(dir.path, 12);
+  write_file_atomic(dir / "bad.csv", "time_s,speed,curvature\n0,1,0\n0.2,inf,0\n");
+  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "bad.csv").string() +
+                                       "' --out '" + ds.string() + "'"),
+                        "bad.csv:3");
+  write_file_atomic(dir / "cols.csv", "t,v\n0,1\n");
+  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "cols.csv").string() +
+                                       "' --out '" + ds.string() + "'"),
+                        "cols.csv:1");
+  // Nothing half-written: no episode directories, no temporary leftovers.
+  if (fs::exists(ds / "episodes")) {
+    EXPECT_TRUE(fs::is_empty(ds / "episodes"));
+  }
+  // A good run works and a second one refuses to overwrite.
+  auto ok = test::run_gaia("ingest '" + video.string() + "' --meta weather=rain --out '" + ds.string() + "'");
+  EXPECT_EQ(ok.status, 0) << ok.output;
+  EXPECT_TRUE(fs::exists(ds / "episodes" / "drive" / "episode.json"));
+  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --out '" + ds.string() + "'"), "already exists");
+}
+
+TEST(Cli, DataStatsSplitAndDemo) {
+  test::TempDir dir;
+  fs::path video = make_video(dir.path, 60);
+  fs::path ds = dir / "ds";
+  write_file_atomic(dir / "s.csv", "time_s,speed,curvature\n0,3,0.01\n3,15,-0.01\n");
+  for (auto [id, weather, lat] : {std::tuple{"a", "rain", "51.50"}, {"b", "clear", "51.60"}, {"c", "clear", "51.70"}}) {
+    auto r = test::run_gaia("ingest '" + video.string() + "' --id " + id + " --signals '" + (dir / "s.csv").string() +
+                            "' --meta weather=" + weather + " --meta latitude=" + lat + " --meta longitude=-0.1 --out '" +
+                            ds.string() + "' --codec raw");
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  auto st = test::run_gaia("data stats '" + ds.string() + "' --balance weather,speed --set world.context_steps=4");
+  EXPECT_EQ(st.status, 0) << st.output;
+  EXPECT_NE(st.output.find("empirical"), std::string::npos);
+  std::string svg = read_file(ds / "balance.svg");
+  EXPECT_NE(svg.find("<svg"), std::string::npos);
+  EXPECT_NE(svg.find("weather"), std::string::npos);
+
+  auto sp = test::run_gaia("data split '" + ds.string() + "' --geofence 51.55,-0.2,51.65,0.0");
+  EXPECT_EQ(sp.status, 0) << sp.output;
+  std::string split = read_file(ds / "split.json");
+  EXPECT_NE(split.find("\"val_geofence\": [\n    \"b\"\n  ]"), std::string::npos) << split;
+
+  auto info = test::run_gaia("data info '" + ds.string() + "'");
+  EXPECT_EQ(info.status, 0) << info.output;
+  EXPECT_NE(info.output.find("3 episodes"), std::string::npos) << info.output;
+
+  auto demo = test::run_gaia("demo --video '" + video.string() + "' --out '" + (dir / "demo").string() + "'");
+  EXPECT_EQ(demo.status, 0) << demo.output;
+  EXPECT_NE(demo.output.find("60 frames"), std::string::npos) << demo.output;
+}
