@@ -156,3 +156,38 @@ TEST(Npy, CorruptFilesFailWithClearErrors) {
   write_raw(dir / "c.npy", cplx);
   EXPECT_NE(error_of([&] { npy_read(dir / "c.npy"); }).find("unsupported .npy dtype"), std::string::npos);
 }
+
+// Cross-checks against a peer: files written by numpy and by torch (tools/make_format_fixtures.py).
+TEST(PeerFixtures, NumpyArraysReadExactly) {
+  fs::path fx = test::source_dir() / "tests" / "fixtures";
+  NpyArray t = npy_read(fx / "tokens_6x8x16_int16.npy");
+  EXPECT_EQ(t.dtype, DType::I16);
+  EXPECT_EQ(t.shape, (std::vector<int64_t>{6, 8, 16}));
+  auto v = t.to_int64();
+  for (int64_t i = 0; i < 6 * 8 * 16; ++i) ASSERT_EQ(v[static_cast<size_t>(i)], (i * 7 + 3) % 1024);
+  NpyArray f = npy_read(fx / "ramp_f32.npy");
+  EXPECT_EQ(f.shape, (std::vector<int64_t>{2, 5}));
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(f.as<float>()[i], i / 4.0f - 1);
+  NpyArray u = npy_read(fx / "ramp_u8.npy");
+  EXPECT_EQ(u.shape, (std::vector<int64_t>{17}));
+  EXPECT_EQ(u.as<uint8_t>()[16], 16);
+  // Our writer produces the same bytes numpy does for the same array.
+  test::TempDir dir;
+  npy_write(dir / "again.npy", t);
+  EXPECT_EQ(read_file(dir / "again.npy"), read_file(fx / "tokens_6x8x16_int16.npy"));
+}
+
+TEST(PeerFixtures, TorchSafetensorsReadExactly) {
+  SafetensorsFile f(test::source_dir() / "tests" / "fixtures" / "peer.safetensors");
+  EXPECT_EQ(f.metadata().at("format"), "pt");
+  auto w = f.to_float("encoder.weight");
+  ASSERT_EQ(w.size(), 12u);
+  for (int i = 0; i < 12; ++i) EXPECT_EQ(w[static_cast<size_t>(i)], i / 8.0f - 0.5f);
+  auto h = f.to_float("encoder.half");
+  for (int i = 0; i < 6; ++i) EXPECT_EQ(h[static_cast<size_t>(i)], half_to_float(float_to_half(i / 3.0f)));
+  auto b = f.to_float("encoder.bf16");
+  for (int i = 0; i < 6; ++i) EXPECT_EQ(b[static_cast<size_t>(i)], i - 2.5f);
+  const auto& c = f.get("codes");
+  EXPECT_EQ(c.dtype, DType::I64);
+  EXPECT_EQ(reinterpret_cast<const int64_t*>(c.data)[4], 4000);
+}
