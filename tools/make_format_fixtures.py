@@ -3,11 +3,10 @@
 laid out by hand from the Hugging Face spec, and one through torch's own tensor bytes). Run from the repo root:
     /usr/bin/python3 tools/make_format_fixtures.py
 The C++ tests recompute the same values from the same formulas and compare."""
-import json
-import struct
-
 import numpy as np
 import torch
+
+import safetensors_py
 
 out = "tests/fixtures/"
 
@@ -24,17 +23,5 @@ tensors = {
     "encoder.bf16": (torch.arange(6, dtype=torch.float32) - 2.5).to(torch.bfloat16),
     "codes": torch.arange(5, dtype=torch.int64) * 1000,
 }
-names = {torch.float32: "F32", torch.float16: "F16", torch.bfloat16: "BF16", torch.int64: "I64"}
-header, blobs, off = {}, [], 0
-for k in sorted(tensors):
-    t = tensors[k].contiguous()
-    raw = t.view(torch.uint8).numpy().tobytes() if t.dtype == torch.bfloat16 else t.numpy().tobytes()
-    header[k] = {"dtype": names[t.dtype], "shape": list(t.shape), "data_offsets": [off, off + len(raw)]}
-    blobs.append(raw)
-    off += len(raw)
-header["__metadata__"] = {"format": "pt", "made_by": "tools/make_format_fixtures.py"}
-h = json.dumps(header, separators=(",", ":")).encode()
-h += b" " * ((8 - (8 + len(h)) % 8) % 8)
-with open(out + "peer.safetensors", "wb") as f:
-    f.write(struct.pack("<Q", len(h)) + h + b"".join(blobs))
+safetensors_py.save(tensors, out + "peer.safetensors", {"format": "pt", "made_by": "tools/make_format_fixtures.py"})
 print("wrote fixtures")

@@ -26,12 +26,12 @@ struct DataConfig {
 struct TokenizerConfig {
   int downsample = 8;            // D; paper §4.1: D = 16
   int codebook_size = 1024;      // K; paper §4.1: K = 8192
-  int code_dim = 32;             // low-dimensional code space (Yu et al. 2022 factorised codes)
-  int channels = 64;             // base width of the encoder/decoder
+  int code_dim = 16;             // low-dimensional code space (Yu et al. 2022 factorised codes)
+  int channels = 32;             // base width of the encoder/decoder (CPU-sized; paper scale: see paper.yaml)
   std::vector<int> channel_mult{1, 2, 2, 4};  // one entry per resolution level; log2(D) downsamplings
-  int res_blocks = 2;            // ResNet blocks per level
-  int z_channels = 256;          // width at the bottleneck before the code projection
-  int disc_channels = 64;        // PatchGAN discriminator width
+  int res_blocks = 1;            // ResNet blocks per level (the decoder uses one more)
+  int z_channels = 128;          // width at the bottleneck before the code projection
+  int disc_channels = 32;        // PatchGAN discriminator width
   int disc_layers = 3;
   // paper §4.1 loss weights
   double w_l1 = 0.2, w_l2 = 2.0, w_perceptual = 0.1, w_gan = 1.0, w_codebook = 1.0, w_dino = 0.1;
