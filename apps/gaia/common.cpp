@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/torch/tensor_io.h"
 
 namespace gaia::app {
 
@@ -31,6 +32,7 @@ Config resolve_config(const SharedFlags& f) {
 
 void apply_threads(const Config& c) {
   if (c.run.threads > 0) cv::setNumThreads(c.run.threads);
+  set_torch_threads(c.run.threads);
 }
 
 }  // namespace gaia::app

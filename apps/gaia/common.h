@@ -32,5 +32,7 @@ void register_plan(CLI::App& app);
 void register_demo(CLI::App& app);
 void register_ingest(CLI::App& app);
 void register_data(CLI::App& app);
+void register_synth(CLI::App& app);
+void register_tokenizer(CLI::App& app);  // also registers `gaia tokenize`
 
 }  // namespace gaia::app

@@ -17,6 +17,8 @@ int main(int argc, char** argv) {
   gaia::app::register_plan(app);
   gaia::app::register_ingest(app);
   gaia::app::register_data(app);
+  gaia::app::register_synth(app);
+  gaia::app::register_tokenizer(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

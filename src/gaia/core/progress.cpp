@@ -35,9 +35,11 @@ void ProgressBar::update(int64_t done, const std::string& info) {
     last_draw_ = now;
     draw(false);
   } else {
+    // Logs: a line every 10% or every 30 s, whichever comes first.
     int decile = total_ > 0 ? static_cast<int>(10 * done / total_) : 0;
-    if (decile != last_decile_) {
+    if (decile != last_decile_ || now - last_draw_ > std::chrono::seconds(30)) {
       last_decile_ = decile;
+      last_draw_ = now;
       draw(false);
     }
   }

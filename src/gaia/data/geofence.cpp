@@ -1,5 +1,6 @@
 #include "gaia/data/geofence.h"
 
+#include <algorithm>
 #include <random>
 
 #include "gaia/core/error.h"
@@ -61,6 +62,35 @@ Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, doubl
     else s.train.push_back(m.id);
   }
   return s;
+}
+
+Split load_or_default_split(const Dataset& ds, double frac, uint64_t seed) {
+  fs::path f = ds.root() / "split.json";
+  if (fs::exists(f)) {
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(read_file(f));
+    } catch (const nlohmann::json::exception& e) {
+      fail("{}: invalid JSON ({})", f.string(), e.what());
+    }
+    return Split::from_json(j, f.string());
+  }
+  Split s = geofence_split(ds, {}, frac, seed);
+  if (s.val_random.empty() && s.train.size() >= 2) {  // tiny datasets: hold out the last episode
+    s.val_random.push_back(s.train.back());
+    s.train.pop_back();
+  }
+  return s;
+}
+
+std::vector<size_t> episode_indices(const Dataset& ds, const std::vector<std::string>& ids) {
+  std::vector<size_t> out;
+  for (auto& id : ids) {
+    auto it = std::find(ds.ids().begin(), ds.ids().end(), id);
+    if (it == ds.ids().end()) fail("{}: split names episode '{}' which is not in the dataset", ds.root().string(), id);
+    out.push_back(static_cast<size_t>(it - ds.ids().begin()));
+  }
+  return out;
 }
 
 }  // namespace gaia::data

@@ -29,4 +29,9 @@ struct Split {
 // Episodes without a location are never geofenced; random hold-out is seeded and independent of order.
 Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
 
+// DATASET/split.json when present (from `gaia data split`), otherwise a seeded random hold-out of `frac` of the
+// episodes (at least one when there are two or more) so that training always has a validation set.
+Split load_or_default_split(const Dataset& ds, double frac = 0.1, uint64_t seed = 0);
+std::vector<size_t> episode_indices(const Dataset& ds, const std::vector<std::string>& ids);  // ids -> Dataset indices
+
 }  // namespace gaia::data

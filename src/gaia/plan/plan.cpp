@@ -4,6 +4,8 @@
 
 #include <fmt/format.h>
 
+#include "gaia/eval/metrics.h"
+
 namespace gaia::plan {
 
 namespace {
@@ -146,8 +148,7 @@ Plan make_plan(const Config& c) {
   p.decoder = decoder_params(c);
   p.image_tokens = c.image_tokens();
   p.sequence_length = c.sequence_length();
-  p.bit_compression = double(c.data.height) * c.data.width * 3 * 8 /
-                      (double(p.image_tokens) * std::log2(double(c.tokenizer.codebook_size)));
+  p.bit_compression = eval::bit_compression(c.data.height, c.data.width, p.image_tokens, c.tokenizer.codebook_size);
   const double N = double(p.world.non_embedding), s = double(p.sequence_length), d = c.world.d_model;
   const double L = c.world.n_layers;
   p.world_flops_per_token = 6 * N;

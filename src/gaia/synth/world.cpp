@@ -116,13 +116,16 @@ void World::spawn() {
   ego_.v_des = r.uniform(D.speed_min, D.speed_max);
   ego_.next_vdes_t = r.uniform(3, 8);
   ego_.next_lc_t = r.uniform(2, 8);
+  if (spec_.scene == "red_light") ego_.v_des = D.speed_min * 0.9;
   ego_.v = ego_.v_des * (spec_.scene == "random" ? r.uniform(0.6, 1.0) : 0.95);
   ego_.k = road_.at(ego_.s).k;
 
   // Traffic lights (with pedestrian crossings) and speed bumps.
   Rng rl(stream_key(seed, idx, "lights"));
   if (spec_.scene == "red_light" || D.light_spacing > 0) {
-    double s = spec_.scene == "red_light" ? kEgoStart + rl.uniform(50, 65)
+    // The red-light scene's light turns amber 0.8 s in, far enough ahead for a comfortable stop.
+    const double v = ego_.v;
+    double s = spec_.scene == "red_light" ? kEgoStart + std::max(35.0, 0.8 * v + v * v / 4.4 + 8) + rl.uniform(0, 5)
                                           : kEgoStart + rl.uniform(40, std::max(60.0, D.light_spacing));
     const double road_w = L.left_edge() - L.right_edge();
     for (int i = 0; s < agent_range_; ++i) {
@@ -152,13 +155,14 @@ void World::spawn() {
         pd.legs = rl.chance(0.6) ? bgr(35, 40, 60) : bgr(30, 30, 30);
         peds_.push_back(pd);
       }
+      if (D.light_spacing <= 0) break;  // only the scene's light in a district without signals
       s += D.light_spacing * rl.uniform(0.6, 1.4) + 40;
     }
   }
   Rng rb(stream_key(seed, idx, "bumps"));
   if (D.bump_p > 0) {
     for (double s = kEgoStart + 30; s < agent_range_; s += rb.uniform(30, 200) / D.bump_p * 0.35) {
-      bool near_light = false;
+      bool near_light = spec_.scene == "red_light" && !lights_.empty() && s < lights_[0].s + 10;
       for (auto& l : lights_) near_light |= std::abs(l.s - s) < 30;
       if (!near_light) bumps_.push_back(s);
     }
@@ -381,6 +385,15 @@ double World::idm(double v, double v_des, double gap, double dv) const {
   return std::max(a, -8.0);
 }
 
+// Braking towards a stop point `gap` metres ahead: nothing until a constant deceleration of 1.8 m/s^2 is
+// needed, then exactly the constant deceleration that stops a metre before the point.
+static double stop_accel(double v, double gap) {
+  const double room = gap - 1.0;
+  if (room <= 0.05) return v > 0.05 ? -8.0 : 0.0;
+  const double need = v * v / (2 * room);
+  return need < 1.8 ? 1e9 : -std::min(need, 8.0);
+}
+
 bool World::lane_clear(int lane) const {
   const double dl = layout_.lane_centre(lane);
   for (auto& v : vehicles_)
@@ -429,12 +442,18 @@ ActionStep World::policy() {
   const double k = std::clamp(2 * lat / std::max(1.0, fwd * fwd + lat * lat), -0.2, 0.2);
 
   // Longitudinal: cruise speed, bends, bumps, lead vehicle, red lights, pedestrians.
+  // Speed limits ahead (bends, bumps) become a comfortable deceleration profile: v^2 = v_lim^2 + 2 b x.
   double vdes = ego_.v_des;
-  const double kmax = road_.max_abs_curvature(ego_.s, ego_.s + 20 + 3 * v);
-  if (kmax > 1e-4) vdes = std::min(vdes, std::sqrt(1.8 / kmax));
-  for (double b : bumps_)
-    if (b - ego_.s > -3 && b - ego_.s < 20 + 1.5 * v) vdes = std::min(vdes, 4.5);
-  double a = idm(v, vdes, 1e9, 0);
+  const double b_comf = 1.5;
+  for (double x = 0; x <= 60; x += 4) {
+    const double kk = std::abs(road_.at(ego_.s + x).k);
+    if (kk > 1e-4) vdes = std::min(vdes, std::sqrt(1.8 / kk + 2 * b_comf * x));
+  }
+  for (double b : bumps_) {
+    const double x = b - ego_.s;
+    if (x > -3 && x < 60) vdes = std::min(vdes, std::sqrt(4.5 * 4.5 + 2 * b_comf * std::max(0.0, x - 2)));
+  }
+  double a = std::max(idm(v, vdes, 1e9, 0), -b_comf);
   const double front = ego_.s + kEgoFront;
   for (auto& o : vehicles_) {
     if (o.dir == 0) continue;
@@ -450,18 +469,18 @@ ActionStep World::policy() {
     const TrafficLight& l = lights_[static_cast<size_t>(li)];
     const int st = l.state(t);
     const double gap = l.s - front;
-    if (gap > -0.5 && (st == 2 || (st == 1 && gap > v * v / (2 * 3.0) - 1.0))) a = std::min(a, idm(v, vdes, gap, v));
+    if (gap > -0.5 && (st == 2 || (st == 1 && gap > v * v / (2 * 3.0) - 1.0))) a = std::min(a, stop_accel(v, gap));
   }
   for (auto& p : peds_) {
     if (p.light < 0) continue;
     PedPose q = pedestrian_pose(p, t);
     if (q.on_road && std::abs(q.d - ego_.d) < 3.0) {
       const double gap = q.s - 1.5 - front;
-      if (gap > -0.5 && gap < 60) a = std::min(a, idm(v, vdes, gap, v));
+      if (gap > -0.5 && gap < 60) a = std::min(a, stop_accel(v, gap));
     }
   }
   double v_new = std::clamp(v + a * dt, 0.0, 30.0);
-  if (v_new < 0.03 && a < 0) v_new = 0;
+  if (v_new < 0.05 && a < 0) v_new = 0;
   return {static_cast<double>(static_cast<float>(v_new)), static_cast<double>(static_cast<float>(k))};
 }
 
@@ -490,8 +509,14 @@ int World::lead_vehicle(double& distance) const {
 void World::step(const ActionStep& act) {
   const double t = time(), dt = 1.0 / spec_.fps;
   // Agents (they see the ego's state at time t).
+  // Vehicles far from the ego (never visible) are dormant: they keep their speed and ignore each other,
+  // which keeps a step O(nearby^2) however long the episode.
+  constexpr double kActive = 500;
+  std::vector<size_t> active;
+  for (size_t i = 0; i < vehicles_.size(); ++i)
+    if (std::abs(vehicles_[i].s - ego_.s) < kActive) active.push_back(i);
   std::vector<double> acc(vehicles_.size(), 0.0);
-  for (size_t i = 0; i < vehicles_.size(); ++i) {
+  for (size_t i : active) {
     Vehicle& o = vehicles_[i];
     if (o.dir == 0) continue;
     double v0 = o.v0;
@@ -510,7 +535,7 @@ void World::step(const ActionStep& act) {
     }
     double a = idm(o.v, v0, 1e9, 0) * 0.9;
     const double front = o.s + o.dir * o.length / 2;
-    for (size_t j = 0; j < vehicles_.size(); ++j) {
+    for (size_t j : active) {
       const Vehicle& p = vehicles_[j];
       if (j == i || std::abs(p.d - o.d) > 2.0 || p.dir == 0) continue;
       const double gap = o.dir * (p.s - o.s) - (o.length + p.length) / 2;
@@ -522,18 +547,19 @@ void World::step(const ActionStep& act) {
       if (gap > -0.5 && gap < 120) a = std::min(a, idm(o.v, v0, gap, o.v - o.dir * ego_.v));
     }
     for (auto& l : lights_) {
+      if (std::abs(l.s - o.s) > 100) continue;
       const double stop = o.dir > 0 ? l.s : l.s + 6.0;
       const double gap = o.dir * (stop - front);
       if (gap < -0.5 || gap > 80) continue;
       const int st = l.state(t);
-      if (st == 2 || (st == 1 && gap > o.v * o.v / 6.0 - 1.0)) a = std::min(a, idm(o.v, v0, gap, o.v));
+      if (st == 2 || (st == 1 && gap > o.v * o.v / 6.0 - 1.0)) a = std::min(a, stop_accel(o.v, gap));
     }
     for (auto& p : peds_) {
-      if (p.light < 0) continue;
+      if (p.light < 0 || std::abs(lights_[static_cast<size_t>(p.light)].s - o.s) > 80) continue;
       PedPose q = pedestrian_pose(p, t);
       if (q.on_road && std::abs(q.d - o.d) < 3.0) {
         const double gap = o.dir * (q.s - front) - 1.5;
-        if (gap > -0.5 && gap < 60) a = std::min(a, idm(o.v, v0, gap, o.v));
+        if (gap > -0.5 && gap < 60) a = std::min(a, stop_accel(o.v, gap));
       }
     }
     acc[i] = a;

@@ -4,8 +4,8 @@
 //
 // Sign conventions (docs/synth.md): world x east, y north, heading counter-clockwise; curvature > 0 turns
 // left; road lateral offset d > 0 is left of the road centre line; left-hand traffic, so the ego's lanes are
-// at d > 0; lane 0 is the kerb-side (leftmost) lane. Camera pitch > 0 is nose up, roll > 0 tilts the image
-// clockwise.
+// at d > 0; lane 0 is the kerb-side (leftmost) lane. Camera pitch > 0 is nose up; roll > 0 means the body
+// leans right (out of a left turn), which rotates the image content counter-clockwise.
 #include <cstdint>
 #include <map>
 #include <string>

@@ -1,6 +1,7 @@
 #include "gaia/torch/tensor_io.h"
 
 #include <regex>
+#include <thread>
 
 #include "gaia/core/error.h"
 
@@ -17,6 +18,11 @@ torch::Device parse_device(const std::string& s) {
     return torch::Device(torch::kCUDA, static_cast<c10::DeviceIndex>(idx));
   }
   return torch::Device(torch::kCPU);
+}
+
+void set_torch_threads(int n) {
+  if (n <= 0) n = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  torch::set_num_threads(n);
 }
 
 torch::Dtype to_torch(DType t) {

@@ -15,6 +15,9 @@ torch::Device parse_device(const std::string& s);
 torch::Dtype to_torch(DType t);
 DType from_torch(torch::Dtype t);
 
+// Sets LibTorch's intra-op threads (0 = all cores); some builds otherwise default to one thread.
+void set_torch_threads(int n);
+
 // Copies a tensor out of a (mapped) safetensors view.
 torch::Tensor tensor_from_view(const TensorView& v);
 

@@ -1,0 +1,86 @@
+// gaia synth: procedural driving episodes with ground-truth actions, captions and labels; gaia synth replay.
+#include <cstdio>
+#include <regex>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/synth/synth.h"
+
+namespace gaia::app {
+
+namespace {
+void parse_size(const std::string& s, int* h, int* w) {
+  std::smatch m;
+  static const std::regex re("(\\d+)x(\\d+)");
+  if (!std::regex_match(s, m, re)) fail("--size '{}': expected HxW, e.g. 72x128", s);
+  *h = std::stoi(m[1].str());
+  *w = std::stoi(m[2].str());
+  if (*h < 16 || *w < 16 || *h > 4096 || *w > 4096) fail("--size '{}': sides must be in [16, 4096]", s);
+}
+}  // namespace
+
+void register_synth(CLI::App& app) {
+  auto* cmd = app.add_subcommand("synth", "render procedural driving episodes (ground truth for evaluation)");
+  auto flags = std::make_shared<SharedFlags>();
+  auto o = std::make_shared<synth::SynthOptions>();
+  auto episodes = std::make_shared<int>(4);
+  auto first = std::make_shared<int>(0);
+  auto size = std::make_shared<std::string>();
+  cmd->add_option("--episodes", *episodes, "number of episodes");
+  cmd->add_option("--first", *first, "index of the first episode (to extend a dataset)");
+  cmd->add_option("--seconds", o->seconds, "seconds per episode");
+  cmd->add_option("--size", *size, "frame size HxW (default: config data.height x data.width)");
+  cmd->add_option("--fps", o->fps, "frame rate (paper §3: 25 Hz)");
+  cmd->add_option("--weather", o->weather, "clear | overcast | rain | fog | snow (default: each district's climate)");
+  cmd->add_option("--time", o->time_of_day, "day | dusk | night (default: random)");
+  cmd->add_option("--scene", o->scene, "random | bend | red_light | lead_vehicle | straight");
+  cmd->add_option("--district", o->district, "virtual district (default: random)");
+  cmd->add_option("--codec", o->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
+  cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
+  add_shared_flags(cmd, flags.get(), "dataset directory");
+  cmd->callback([=] {
+    if (cmd->got_subcommand("replay")) return;
+    Config c = resolve_config(*flags);
+    apply_threads(c);
+    if (flags->out.empty()) fail("gaia synth: --out DATASET is required");
+    if (*episodes < 1) fail("--episodes must be >= 1");
+    if (!(o->seconds > 0)) fail("--seconds must be positive");
+    synth::SynthOptions opt = *o;
+    opt.seed = c.run.seed;
+    opt.height = c.data.height;
+    opt.width = c.data.width;
+    if (!size->empty()) parse_size(*size, &opt.height, &opt.width);
+    const int64_t per = static_cast<int64_t>(opt.seconds * opt.fps);
+    ProgressBar bar(per * *episodes, "synth");
+    for (int e = 0; e < *episodes; ++e)
+      synth::write_episode(flags->out, opt, *first + e, [&](int64_t done, int64_t) { bar.update(per * e + done); });
+    bar.finish();
+    std::printf("wrote %d episodes of %.3g s at %dx%d, %.3g fps -> %s\n", *episodes, opt.seconds, opt.height, opt.width,
+                opt.fps, flags->out.c_str());
+  });
+
+  auto* rep = cmd->add_subcommand("replay", "counterfactual replay of an episode under other actions");
+  auto rflags = std::make_shared<SharedFlags>();
+  auto episode = std::make_shared<std::string>(), actions = std::make_shared<std::string>(), id = std::make_shared<std::string>();
+  auto from = std::make_shared<int64_t>(0);
+  auto overwrite = std::make_shared<bool>(false);
+  rep->add_option("EPISODE", *episode, "episode directory (DATASET/episodes/<id>) of a synth dataset")->required();
+  rep->add_option("--from", *from, "first frame driven with the new actions");
+  rep->add_option("--actions", *actions, "CSV with columns speed,curvature: one row per frame at the episode fps")->required();
+  rep->add_option("--id", *id, "id of the replayed episode (default: <episode>-replay-<from>)");
+  rep->add_flag("--overwrite", *overwrite, "replace an existing replay");
+  add_shared_flags(rep, rflags.get(), "dataset directory for the replayed episode");
+  rep->callback([=] {
+    Config c = resolve_config(*rflags);
+    if (rflags->out.empty()) fail("gaia synth replay: --out DATASET is required");
+    data::Episode ep(*episode);
+    auto acts = synth::read_actions_csv(*actions);
+    std::string out_id = id->empty() ? fmt::format("{}-replay-{}", ep.meta().id, *from) : *id;
+    auto m = synth::replay(ep, *from, acts, rflags->out, out_id, *overwrite);
+    std::printf("replayed %s from frame %lld with %zu actions -> %s/episodes/%s\n", ep.meta().id.c_str(),
+                (long long)*from, acts.size(), rflags->out.c_str(), m.id.c_str());
+  });
+}
+
+}  // namespace gaia::app

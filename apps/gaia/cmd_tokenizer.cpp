@@ -1,0 +1,221 @@
+// gaia tokenizer train|eval|reconstruct|pca and gaia tokenize: the image tokenizer of §2.2.
+#include <cstdio>
+#include <random>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/data/geofence.h"
+#include "gaia/data/video_io.h"
+#include "gaia/eval/metrics.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/tokenizer/tokenize.h"
+#include "gaia/tokenizer/trainer.h"
+#include "gaia/torch/tensor_io.h"
+
+namespace gaia::app {
+
+namespace {
+
+// Frames from a dataset (its validation episodes first, or all) or a video file, resized to the tokenizer size.
+std::vector<cv::Mat> load_frames(const std::string& src, int h, int w, int max_frames, int stride) {
+  std::vector<cv::Mat> frames;
+  if (fs::exists(fs::path(src) / "dataset.json")) {
+    data::Dataset ds(src);
+    data::Split sp = data::load_or_default_split(ds);
+    std::vector<std::string> ids = sp.val_geofence;
+    ids.insert(ids.end(), sp.val_random.begin(), sp.val_random.end());
+    if (ids.empty()) ids = ds.ids();
+    for (size_t e : data::episode_indices(ds, ids)) {
+      data::Episode ep = ds.episode(e);
+      for (int64_t i = 0; i < ep.size() && static_cast<int>(frames.size()) < max_frames; i += stride)
+        frames.push_back(data::resize_center_crop(ep.frame_bgr(i), h, w));
+    }
+  } else {
+    data::VideoSource v(src);
+    data::VideoFrame f;
+    for (int i = 0; v.next(&f) && static_cast<int>(frames.size()) < max_frames; ++i)
+      if (i % stride == 0) frames.push_back(data::resize_center_crop(f.bgr, h, w));
+  }
+  if (frames.empty()) fail("{}: no frames", src);
+  return frames;
+}
+
+}  // namespace
+
+void register_tokenizer(CLI::App& app) {
+  auto* tok = app.add_subcommand("tokenizer", "image tokenizer (§2.2): train, eval, reconstruct, pca");
+  tok->require_subcommand(1);
+
+  {
+    auto* cmd = tok->add_subcommand("train", "train the VQ tokenizer on a dataset (resumes from OUT/checkpoint)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto o = std::make_shared<tokenizer::TrainOptions>();
+    auto dataset = std::make_shared<std::string>();
+    auto vgg = std::make_shared<std::string>(), dino = std::make_shared<std::string>();
+    cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
+    cmd->add_option("--vgg", *vgg, "VGG16 weights (torchvision layout, safetensors) for the perceptual loss");
+    cmd->add_option("--dino", *dino, "DINO ViT weights (timm or torchvision layout, safetensors) for the DINO loss");
+    cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)");
+    cmd->add_option("--val-every", o->val_every, "steps between validations");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, tokenizer.safetensors, metrics.jsonl)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      apply_threads(c);
+      if (flags->out.empty()) fail("gaia tokenizer train: --out RUN_DIR is required");
+      tokenizer::TrainOptions opt = *o;
+      opt.dataset = *dataset;
+      opt.out = flags->out;
+      opt.vgg = *vgg;
+      opt.dino = *dino;
+      std::unique_ptr<ProgressBar> bar;
+      auto r = tokenizer::train_tokenizer(
+          c, opt,
+          [&](const tokenizer::StepLog& l) {
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "tokenizer");
+            std::string info = fmt::format("loss {:.4f} l1 {:.4f}", l.losses.value("loss", 0.0), l.losses.value("l1", 0.0));
+            if (l.validation && !l.val.empty())
+              info += fmt::format(" | val psnr {:.2f} usage {:.0f}%", l.val.value("psnr", 0.0), 100 * l.val.value("usage", 0.0));
+            bar->update(l.step, info);
+          },
+          [](const std::string& n) { std::fprintf(stderr, "tokenizer: %s\n", n.c_str()); });
+      if (bar) bar->finish();
+      std::printf("tokenizer: step %d%s; last validation %s\n", r.final_step,
+                  r.final_step >= (opt.steps > 0 ? opt.steps : c.tokenizer.steps) ? " (done)" : " (checkpointed)",
+                  r.last_val.dump().c_str());
+    });
+  }
+
+  {
+    auto* cmd = tok->add_subcommand("eval", "PSNR, SSIM, code usage, perplexity and bit compression on held-out frames");
+    auto flags = std::make_shared<SharedFlags>();
+    auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    auto max_frames = std::make_shared<int>(256);
+    auto stride = std::make_shared<int>(5);
+    cmd->add_option("SOURCE", *src, "dataset (its validation episodes) or a video file")->required();
+    cmd->add_option("--tokenizer", *weights, "tokenizer weights (safetensors)")->required();
+    cmd->add_option("--max-frames", *max_frames, "frames to score");
+    cmd->add_option("--stride", *stride, "use every Nth frame");
+    add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      auto dev = parse_device(run.run.device);
+      Config c;
+      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto frames = load_frames(*src, c.data.height, c.data.width, *max_frames, *stride);
+      ProgressBar bar(static_cast<int64_t>(frames.size()), "eval");
+      double p = 0, s = 0;
+      std::vector<int64_t> counts(static_cast<size_t>(c.tokenizer.codebook_size), 0);
+      for (size_t b = 0; b < frames.size(); b += 16) {
+        std::vector<cv::Mat> chunk(frames.begin() + static_cast<long>(b), frames.begin() + static_cast<long>(std::min(frames.size(), b + 16)));
+        auto tokens = tokenizer::encode_frames(t, chunk, dev);
+        auto rec = tokenizer::decode_tokens(t, tokens, dev);
+        auto flat = tokens.reshape({-1});
+        for (int64_t i = 0; i < flat.size(0); ++i) counts[static_cast<size_t>(flat[i].item<int64_t>())]++;
+        for (size_t i = 0; i < chunk.size(); ++i) { p += eval::psnr(chunk[i], rec[i]); s += eval::ssim(chunk[i], rec[i]); }
+        bar.update(static_cast<int64_t>(b + chunk.size()));
+      }
+      bar.finish();
+      auto cs = eval::code_stats(counts);
+      nlohmann::json j = {{"source", *src}, {"frames", frames.size()}, {"psnr", p / double(frames.size())},
+                          {"ssim", s / double(frames.size())}, {"code_usage", cs.usage}, {"code_perplexity", cs.perplexity},
+                          {"bit_compression", eval::bit_compression(c.data.height, c.data.width, c.image_tokens(), c.tokenizer.codebook_size)}};
+      std::printf("%s\n", j.dump(2).c_str());
+      if (!flags->out.empty()) write_file_atomic(flags->out, j.dump(2) + "\n");
+    });
+  }
+
+  {
+    auto* cmd = tok->add_subcommand("reconstruct", "side-by-side original | reconstruction video (MP4) and PNG sheet");
+    auto flags = std::make_shared<SharedFlags>();
+    auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    auto max_frames = std::make_shared<int>(100);
+    cmd->add_option("SOURCE", *src, "video file or dataset")->required();
+    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    cmd->add_option("--max-frames", *max_frames, "frames to reconstruct");
+    add_shared_flags(cmd, flags.get(), "output directory");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      if (flags->out.empty()) fail("gaia tokenizer reconstruct: --out DIR is required");
+      auto dev = parse_device(run.run.device);
+      Config c;
+      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto frames = load_frames(*src, c.data.height, c.data.width, *max_frames, 1);
+      auto rec = tokenizer::decode_tokens(t, tokenizer::encode_frames(t, frames, dev), dev);
+      std::vector<cv::Mat> side;
+      for (size_t i = 0; i < frames.size(); ++i) {
+        cv::Mat s;
+        cv::hconcat(frames[i], rec[i], s);
+        side.push_back(s);
+      }
+      fs::create_directories(flags->out);
+      data::write_video(fs::path(flags->out) / "reconstruction.mp4", side, 25.0);
+      std::vector<cv::Mat> sheet_rows(side.begin(), side.begin() + static_cast<long>(std::min<size_t>(side.size(), 6)));
+      cv::Mat sheet;
+      cv::vconcat(sheet_rows, sheet);
+      std::vector<uchar> png;
+      cv::imencode(".png", sheet, png);
+      write_file_atomic(fs::path(flags->out) / "reconstruction.png", std::string(png.begin(), png.end()));
+      std::printf("wrote %s/reconstruction.mp4 and reconstruction.png (%zu frames)\n", flags->out.c_str(), frames.size());
+    });
+  }
+
+  {
+    auto* cmd = tok->add_subcommand("pca", "top-3 PCA components of the token embeddings as RGB (the paper's Fig. 3)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    auto n = std::make_shared<int>(6);
+    cmd->add_option("SOURCE", *src, "video file or dataset")->required();
+    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    cmd->add_option("--frames", *n, "frames to show");
+    add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      auto dev = parse_device(run.run.device);
+      Config c;
+      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto frames = load_frames(*src, c.data.height, c.data.width, *n, 10);
+      cv::Mat sheet = tokenizer::pca_sheet(t, frames, dev);
+      std::vector<uchar> png;
+      cv::imencode(".png", sheet, png);
+      fs::path out = flags->out.empty() ? fs::path("pca.png") : fs::path(flags->out);
+      write_file_atomic(out, std::string(png.begin(), png.end()));
+      std::printf("wrote %s\n", out.c_str());
+    });
+  }
+
+  {
+    auto* cmd = app.add_subcommand("tokenize", "frames -> token episodes at the world-model rate (resumes per episode)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    cmd->add_option("DATASET", *src, "episode dataset")->required();
+    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    add_shared_flags(cmd, flags.get(), "token dataset directory");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      if (flags->out.empty()) fail("gaia tokenize: --out TOKENS is required");
+      auto dev = parse_device(run.run.device);
+      std::unique_ptr<ProgressBar> bar;
+      auto r = tokenizer::tokenize_dataset(*src, *weights, flags->out, run.data.world_fps, dev,
+                                           [&](int64_t done, int64_t total) {
+                                             if (!bar) bar = std::make_unique<ProgressBar>(total, "tokenize");
+                                             bar->update(done);
+                                           });
+      if (bar) bar->finish();
+      std::printf("tokenized %lld episodes (%lld skipped as already done), %lld steps at %.4g Hz -> %s\n",
+                  (long long)r.episodes_written, (long long)r.episodes_skipped, (long long)r.steps, run.data.world_fps,
+                  flags->out.c_str());
+    });
+  }
+}
+
+}  // namespace gaia::app

@@ -1,0 +1,68 @@
+#include "gaia/eval/metrics.h"
+
+#include <cmath>
+
+#include <opencv2/imgproc.hpp>
+
+#include "gaia/core/error.h"
+
+namespace gaia::eval {
+
+double psnr(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) fail("psnr: images differ in size or type");
+  cv::Mat d;
+  cv::absdiff(a, b, d);
+  d.convertTo(d, CV_64F);
+  double mse = cv::mean(d.mul(d))[0];
+  if (a.channels() > 1) {
+    cv::Scalar m = cv::mean(d.mul(d));
+    mse = 0;
+    for (int c = 0; c < a.channels(); ++c) mse += m[c];
+    mse /= a.channels();
+  }
+  return mse <= 1e-10 ? 99.0 : 10.0 * std::log10(255.0 * 255.0 / mse);
+}
+
+double ssim(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) fail("ssim: images differ in size or type");
+  const double C1 = 6.5025, C2 = 58.5225;  // (0.01 * 255)^2, (0.03 * 255)^2
+  cv::Mat x, y;
+  a.convertTo(x, CV_64F);
+  b.convertTo(y, CV_64F);
+  auto blur = [](const cv::Mat& m) {
+    cv::Mat o;
+    cv::GaussianBlur(m, o, cv::Size(11, 11), 1.5);
+    return o;
+  };
+  cv::Mat mx = blur(x), my = blur(y);
+  cv::Mat sxx = blur(x.mul(x)) - mx.mul(mx), syy = blur(y.mul(y)) - my.mul(my), sxy = blur(x.mul(y)) - mx.mul(my);
+  cv::Mat num = (2 * mx.mul(my) + C1).mul(2 * sxy + C2);
+  cv::Mat den = (mx.mul(mx) + my.mul(my) + C1).mul(sxx + syy + C2);
+  cv::Mat s;
+  cv::divide(num, den, s);
+  cv::Scalar m = cv::mean(s);
+  double total = 0;
+  for (int c = 0; c < a.channels(); ++c) total += m[c];
+  return total / a.channels();
+}
+
+CodeStats code_stats(const std::vector<int64_t>& counts) {
+  CodeStats s;
+  for (auto c : counts) { s.total_tokens += c; s.used += c > 0; }
+  if (counts.empty() || s.total_tokens == 0) return s;
+  double h = 0;
+  for (auto c : counts)
+    if (c > 0) {
+      double p = double(c) / double(s.total_tokens);
+      h -= p * std::log(p);
+    }
+  s.usage = double(s.used) / double(counts.size());
+  s.perplexity = std::exp(h);
+  return s;
+}
+
+double bit_compression(int height, int width, int tokens, int codebook_size) {
+  return double(height) * width * 3 * 8 / (double(tokens) * std::log2(double(codebook_size)));
+}
+
+}  // namespace gaia::eval

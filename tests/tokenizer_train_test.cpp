@@ -1,0 +1,156 @@
+// Tokenizer training end to end on tiny synthetic data: overfitting, exact resume, tokenize, and CLI errors.
+#include <torch/torch.h>
+
+#include "gaia/core/config.h"
+#include "gaia/core/error.h"
+#include "gaia/core/npy.h"
+#include "gaia/core/safetensors.h"
+#include "gaia/data/geofence.h"
+#include "gaia/eval/metrics.h"
+#include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/tokenizer/tokenize.h"
+#include "gaia/tokenizer/trainer.h"
+#include "gaia/torch/tensor_io.h"
+#include "test_util.h"
+
+using namespace gaia;
+
+namespace {
+
+Config tiny() {
+  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  c.run.checkpoint_every = 10;
+  return c;
+}
+
+// A tiny synth dataset at the tiny config's 32x64.
+void make_dataset(const fs::path& dir, int episodes, double seconds) {
+  synth::SynthOptions o;
+  o.height = 32;
+  o.width = 64;
+  o.seconds = seconds;
+  o.seed = 5;
+  for (int e = 0; e < episodes; ++e) synth::write_episode(dir, o, e);
+}
+
+}  // namespace
+
+TEST(TokenizerTrain, OverfitsAFewFramesToHighPsnr) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 0.2);  // 2 x 5 frames; one episode trains, one validates -> train on 5 frames
+  Config c = tiny();
+  c.tokenizer.lr = 2e-3;
+  c.tokenizer.final_lr = 2e-3;
+  c.tokenizer.warmup_steps = 0;
+  c.tokenizer.disc_start = 1000000;
+  c.tokenizer.batch_size = 5;
+  c.run.checkpoint_every = 1000;
+  tokenizer::TrainOptions o;
+  o.dataset = dir / "ds";
+  o.out = dir / "run";
+  o.steps = 300;
+  o.val_every = 300;
+  o.restart_every = 50;
+  double first_l2 = -1, last_l2 = 0;
+  auto r = tokenizer::train_tokenizer(c, o, [&](const tokenizer::StepLog& l) {
+    if (first_l2 < 0) first_l2 = l.losses["l2"].get<double>();
+    last_l2 = l.losses["l2"].get<double>();
+  });
+  EXPECT_EQ(r.final_step, 300);
+  EXPECT_LT(last_l2, first_l2 * 0.1);
+  // Reconstruct the training frames with the saved weights: high PSNR.
+  auto t = tokenizer::load_tokenizer(dir / "run" / "tokenizer.safetensors", torch::kCPU);
+  data::Dataset ds(dir / "ds");
+  auto split = data::load_or_default_split(ds);
+  data::Episode ep = ds.episode(data::episode_indices(ds, split.train)[0]);
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < ep.size(); ++i) frames.push_back(ep.frame_bgr(i));
+  auto rec = tokenizer::decode_tokens(t, tokenizer::encode_frames(t, frames, torch::kCPU), torch::kCPU);
+  double p = 0;
+  for (size_t i = 0; i < frames.size(); ++i) p += eval::psnr(frames[i], rec[i]);
+  EXPECT_GT(p / double(frames.size()), 24.0);
+  // Notes say plainly that the teacher losses are off.
+  bool said = false;
+  for (auto& n : r.notes) said = said || n.find("perceptual loss off") != std::string::npos;
+  EXPECT_TRUE(said);
+}
+
+TEST(TokenizerTrain, ResumeIsExact) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 3, 0.4);
+  Config c = tiny();
+  c.tokenizer.disc_start = 6;  // the GAN path and its optimiser are part of the resumed state too
+  tokenizer::TrainOptions o;
+  o.dataset = dir / "ds";
+  o.steps = 16;
+  o.val_every = 100;
+  o.restart_every = 5;
+  o.out = dir / "straight";
+  tokenizer::train_tokenizer(c, o);
+  o.out = dir / "resumed";
+  o.stop_after = 10;
+  auto r1 = tokenizer::train_tokenizer(c, o);
+  EXPECT_EQ(r1.final_step, 10);
+  EXPECT_FALSE(fs::exists(dir / "resumed" / "tokenizer.safetensors"));
+  o.stop_after = -1;
+  auto r2 = tokenizer::train_tokenizer(c, o);
+  EXPECT_TRUE(r2.resumed);
+  EXPECT_EQ(r2.final_step, 16);
+  SafetensorsFile a(dir / "straight" / "tokenizer.safetensors"), b(dir / "resumed" / "tokenizer.safetensors");
+  ASSERT_EQ(a.names(), b.names());
+  for (auto& n : a.names()) {
+    auto ta = tensor_from_view(a.get(n)), tb = tensor_from_view(b.get(n));
+    EXPECT_TRUE(torch::allclose(ta, tb, 1e-6, 1e-7)) << n;
+  }
+}
+
+TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 2.0);  // 50 frames at 25 Hz -> 13 steps at 6.25 Hz
+  Config c = tiny();
+  tokenizer::TrainOptions o;
+  o.dataset = dir / "ds";
+  o.out = dir / "run";
+  o.steps = 2;
+  tokenizer::train_tokenizer(c, o);
+  auto r = tokenizer::tokenize_dataset(dir / "ds", dir / "run" / "tokenizer.safetensors", dir / "tok", 6.25, torch::kCPU);
+  EXPECT_EQ(r.episodes_written, 2);
+  data::Dataset ds(dir / "ds");
+  data::Episode ep = ds.episode(0);
+  fs::path te = dir / "tok" / "episodes" / ds.ids()[0];
+  NpyArray tokens = npy_read(te / "tokens.npy");
+  EXPECT_EQ(tokens.dtype, DType::I16);
+  EXPECT_EQ(tokens.shape, (std::vector<int64_t>{13, 4, 8}));
+  for (auto v : tokens.to_int64()) ASSERT_TRUE(v >= 0 && v < 256);
+  NpyArray actions = npy_read(te / "actions.npy");
+  EXPECT_EQ(actions.shape, (std::vector<int64_t>{13, 2}));
+  // step 2 covers source frames 8..11: speed is their mean
+  double want = (ep.speed(8) + ep.speed(9) + ep.speed(10) + ep.speed(11)) / 4.0;
+  EXPECT_NEAR(actions.as<float>()[2 * 2], want, 1e-4);
+  // Tokens equal encoding the subsampled frames directly.
+  auto t = tokenizer::load_tokenizer(dir / "run" / "tokenizer.safetensors", torch::kCPU);
+  auto direct = tokenizer::encode_frames(t, {ep.frame_bgr(8)}, torch::kCPU);
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(tokens.to_int64()[static_cast<size_t>(2 * 32 + i)], direct.reshape({-1})[i].item<int64_t>());
+  auto again = tokenizer::tokenize_dataset(dir / "ds", dir / "run" / "tokenizer.safetensors", dir / "tok", 6.25, torch::kCPU);
+  EXPECT_EQ(again.episodes_skipped, 2);
+  EXPECT_EQ(again.episodes_written, 0);
+}
+
+TEST(TokenizerTrain, BadInputsAreClearErrors) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 0.2);
+  auto r = test::run_gaia("tokenizer train '" + (dir / "ds").string() + "' --out '" + (dir / "run").string() + "'");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("frames are 32x64, the config wants 72x128"), std::string::npos) << r.output;
+  write_file_atomic(dir / "bad.safetensors", "garbage that is not safetensors at all");
+  auto e = test::run_gaia("tokenizer eval '" + (dir / "ds").string() + "' --tokenizer '" + (dir / "bad.safetensors").string() + "'");
+  EXPECT_NE(e.status, 0);
+  EXPECT_NE(e.output.find("bad.safetensors"), std::string::npos) << e.output;
+  SafetensorsWriter w;
+  w.add_f32("x", {1}, {1.0f});
+  w.write(dir / "notok.safetensors");
+  auto n = test::run_gaia("tokenize '" + (dir / "ds").string() + "' --tokenizer '" + (dir / "notok.safetensors").string() + "' --out '" + (dir / "t").string() + "'");
+  EXPECT_NE(n.status, 0);
+  EXPECT_NE(n.output.find("not a gaia tokenizer"), std::string::npos) << n.output;
+}
