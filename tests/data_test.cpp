@@ -13,6 +13,7 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::error_of;
 using namespace gaia::data;
 
 namespace {
@@ -37,14 +38,6 @@ fs::path make_video(const fs::path& dir, int n, double fps, int w = 160, int h =
   return p;
 }
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 }  // namespace
 

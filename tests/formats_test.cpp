@@ -8,16 +8,9 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::error_of;
 
 namespace {
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 void write_raw(const fs::path& p, const std::string& bytes) {
   std::ofstream o(p, std::ios::binary);

@@ -4,8 +4,10 @@
 
 #include <array>
 #include <cstdio>
+#include <functional>
 #include <string>
 
+#include "gaia/core/error.h"
 #include "gaia/core/fs.h"
 
 namespace gaia::test {
@@ -42,6 +44,16 @@ inline RunResult run_gaia(const std::string& args) {
   int st = pclose(p);
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
+}
+
+// The message of the gaia::Error that f throws, or "" if it throws none.
+inline std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
 }
 
 inline fs::path source_dir() { return fs::path(GAIA_SOURCE_DIR); }

@@ -3,8 +3,6 @@
 // statistics, and a video + contact sheet to look at; with --video, the same summary for a real clip.
 #include <cstdio>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
@@ -16,12 +14,6 @@
 namespace gaia::app {
 
 namespace {
-
-void write_png(const fs::path& p, const cv::Mat& m) {
-  std::vector<uchar> buf;
-  cv::imencode(".png", m, buf);
-  write_file_atomic(p, std::string(buf.begin(), buf.end()));
-}
 
 std::vector<cv::Mat> episode_frames(const data::Episode& ep) {
   std::vector<cv::Mat> f;
@@ -78,7 +70,7 @@ void register_demo(CLI::App& app) {
       std::printf("  %s: %-8s %-5s  speed %4.1f m/s  \"%s\"\n", ep.meta().id.c_str(), ep.meta().weather.c_str(),
                   ep.meta().time_of_day.c_str(), ep.speed(ep.size() / 2), ep.caption(ep.size() / 2).c_str());
     }
-    write_png(out / "contact_sheet.png", synth::contact_sheet(thumbs, labels, 3, 320));
+    data::write_png(out / "contact_sheet.png", synth::contact_sheet(thumbs, labels, 3, 320));
 
     // 2. Counterfactual replay: the first episode again, steering left from 2 s on (ground truth for action control).
     data::Episode first = ds.episode(0);

@@ -3,7 +3,6 @@
 #include <random>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
@@ -43,6 +42,23 @@ std::vector<cv::Mat> load_frames(const std::string& src, int h, int w, int max_f
   }
   if (frames.empty()) fail("{}: no frames", src);
   return frames;
+}
+
+// The shared preamble of the commands that use trained weights: run config, threads, device, the tokenizer and
+// the config it was trained with (stored in its weights file).
+struct Loaded {
+  torch::Device device{torch::kCPU};
+  Config config;  // the tokenizer's own config
+  tokenizer::ImageTokenizer model{nullptr};
+};
+
+Loaded open_tokenizer(const SharedFlags& flags, const std::string& weights) {
+  Config run = resolve_config(flags);
+  apply_threads(run);
+  Loaded l;
+  l.device = parse_device(run.run.device);
+  l.model = tokenizer::load_tokenizer(weights, l.device, &l.config, flags.config.empty() ? nullptr : &run);
+  return l;
 }
 
 }  // namespace
@@ -103,11 +119,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--stride", *stride, "use every Nth frame");
     add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)");
     cmd->callback([=] {
-      Config run = resolve_config(*flags);
-      apply_threads(run);
-      auto dev = parse_device(run.run.device);
-      Config c;
-      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto [dev, c, t] = open_tokenizer(*flags, *weights);
       auto frames = load_frames(*src, c.data.height, c.data.width, *max_frames, *stride);
       ProgressBar bar(static_cast<int64_t>(frames.size()), "eval");
       double p = 0, s = 0;
@@ -141,12 +153,8 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--max-frames", *max_frames, "frames to reconstruct");
     add_shared_flags(cmd, flags.get(), "output directory");
     cmd->callback([=] {
-      Config run = resolve_config(*flags);
-      apply_threads(run);
       if (flags->out.empty()) fail("gaia tokenizer reconstruct: --out DIR is required");
-      auto dev = parse_device(run.run.device);
-      Config c;
-      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto [dev, c, t] = open_tokenizer(*flags, *weights);
       auto frames = load_frames(*src, c.data.height, c.data.width, *max_frames, 1);
       auto rec = tokenizer::decode_tokens(t, tokenizer::encode_frames(t, frames, dev), dev);
       std::vector<cv::Mat> side;
@@ -160,9 +168,7 @@ void register_tokenizer(CLI::App& app) {
       std::vector<cv::Mat> sheet_rows(side.begin(), side.begin() + static_cast<long>(std::min<size_t>(side.size(), 6)));
       cv::Mat sheet;
       cv::vconcat(sheet_rows, sheet);
-      std::vector<uchar> png;
-      cv::imencode(".png", sheet, png);
-      write_file_atomic(fs::path(flags->out) / "reconstruction.png", std::string(png.begin(), png.end()));
+      data::write_png(fs::path(flags->out) / "reconstruction.png", sheet);
       std::printf("wrote %s/reconstruction.mp4 and reconstruction.png (%zu frames)\n", flags->out.c_str(), frames.size());
     });
   }
@@ -177,17 +183,11 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--frames", *n, "frames to show");
     add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)");
     cmd->callback([=] {
-      Config run = resolve_config(*flags);
-      apply_threads(run);
-      auto dev = parse_device(run.run.device);
-      Config c;
-      auto t = tokenizer::load_tokenizer(*weights, dev, &c);
+      auto [dev, c, t] = open_tokenizer(*flags, *weights);
       auto frames = load_frames(*src, c.data.height, c.data.width, *n, 10);
       cv::Mat sheet = tokenizer::pca_sheet(t, frames, dev);
-      std::vector<uchar> png;
-      cv::imencode(".png", sheet, png);
       fs::path out = flags->out.empty() ? fs::path("pca.png") : fs::path(flags->out);
-      write_file_atomic(out, std::string(png.begin(), png.end()));
+      data::write_png(out, sheet);
       std::printf("wrote %s\n", out.c_str());
     });
   }

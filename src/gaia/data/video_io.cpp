@@ -91,6 +91,12 @@ cv::Mat resize_center_crop(const cv::Mat& bgr, int height, int width) {
   return resized(cv::Rect(x, y, width, height)).clone();
 }
 
+void write_png(const fs::path& path, const cv::Mat& bgr) {
+  std::vector<uchar> buf;
+  if (!cv::imencode(".png", bgr, buf)) fail("{}: PNG encoding failed", path.string());
+  write_file_atomic(path, std::string(buf.begin(), buf.end()));
+}
+
 void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, double fps) {
   if (frames.empty()) fail("{}: no frames to write", path.string());
   if (path.has_parent_path()) fs::create_directories(path.parent_path());

@@ -43,6 +43,9 @@ class VideoSource {
 // Scales so the image covers HxW, then crops the centre (keeps the aspect ratio; no letterboxing).
 cv::Mat resize_center_crop(const cv::Mat& bgr, int height, int width);
 
+// Writes a PNG atomically.
+void write_png(const fs::path& path, const cv::Mat& bgr);
+
 // Writes frames to a video file (MP4/H.264 where FFmpeg has it, else MPEG-4 Part 2), atomically.
 void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, double fps);
 

@@ -11,15 +11,20 @@ void save_tokenizer(ImageTokenizer& t, const Config& c, const fs::path& path, bo
   save_module(*t, path, {{"gaia.component", "tokenizer"}, {"gaia.config", copy.to_yaml()}}, half);
 }
 
-ImageTokenizer load_tokenizer(const fs::path& path, const torch::Device& device, Config* config_out) {
+ImageTokenizer load_tokenizer(const fs::path& path, const torch::Device& device, Config* config_out,
+                              const Config* fallback) {
   Config c;
   int64_t dino_dim = 0;
   {
     SafetensorsFile f(path);
     auto md = f.metadata();
-    if (!md.count("gaia.config") || md["gaia.component"] != "tokenizer")
-      fail("{}: not a gaia tokenizer weights file (no gaia.config metadata)", path.string());
-    c.apply_yaml(md["gaia.config"], path.string() + " [metadata]");
+    if (md.count("gaia.config") && md["gaia.component"] == "tokenizer") {
+      c.apply_yaml(md["gaia.config"], path.string() + " [metadata]");
+    } else if (fallback && f.contains("quantizer.codebook.weight")) {
+      c = *fallback;  // a checkpoint's weights: the caller's --config describes the architecture
+    } else {
+      fail("{}: not a gaia tokenizer weights file (no gaia.config metadata; for checkpoint weights pass --config)", path.string());
+    }
     c.validate();
     if (f.contains("dino_head.weight")) dino_dim = f.get("dino_head.weight").shape[0];
   }
