@@ -76,6 +76,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
     cmd->add_option("--vgg", *vgg, "VGG16 weights (torchvision layout, safetensors) for the perceptual loss");
     cmd->add_option("--dino", *dino, "DINO ViT weights (timm or torchvision layout, safetensors) for the DINO loss");
+    cmd->add_option("--init", o->init, "start from these tokenizer weights (fine-tuning; ignored when resuming)");
     cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");

@@ -90,6 +90,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("tokenizer.w_dino", &t.w_dino));
   f.push_back(field("tokenizer.commitment", &t.commitment));
   f.push_back(field("tokenizer.disc_start", &t.disc_start));
+  f.push_back(field("tokenizer.gan_adaptive", &t.gan_adaptive));
   f.push_back(field("tokenizer.lr", &t.lr));
   f.push_back(field("tokenizer.weight_decay", &t.weight_decay));
   f.push_back(field("tokenizer.beta1", &t.beta1));

@@ -37,6 +37,9 @@ struct TokenizerConfig {
   double w_l1 = 0.2, w_l2 = 2.0, w_perceptual = 0.1, w_gan = 1.0, w_codebook = 1.0, w_dino = 0.1;
   double commitment = 0.25;      // van den Oord et al. beta
   int disc_start = 2400;         // GAN loss switched on after this many steps (last fifth of the CPU recipe)
+  // VQGAN (Esser et al. 2021) balance: the GAN gradient at the decoder's last layer is scaled to the size of the
+  // reconstruction gradient there, times w_gan. Without it w_gan = 1.0 swamps L1/L2 at CPU batch sizes.
+  bool gan_adaptive = true;
   // paper §4.1 optimiser: AdamW lr 1e-4, wd 0.01, betas (0.5, 0.9); 5k warm-up, cosine to 1e-5 (batch 160, 200k
   // steps). The CPU recipe trains 3k steps at batch 8, so it uses a 3x higher rate with the same shape.
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.5, beta2 = 0.9, final_lr = 3e-5;

@@ -1,9 +1,11 @@
 #include "gaia/tokenizer/trainer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
 
+#include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/data/frame_sampler.h"
 #include "gaia/data/geofence.h"
@@ -91,6 +93,25 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
+  else if (!opt.init.empty()) {
+    // Fine-tuning: weights from an earlier run, fresh optimiser and schedule. The architecture must match.
+    Config init_cfg;
+    auto init = load_tokenizer(opt.init, dev, &init_cfg, &cfg);
+    auto src = init->named_parameters();
+    torch::NoGradGuard ng;
+    for (auto& p : model->named_parameters()) {
+      auto* q = src.find(p.key());
+      if (!q) {
+        if (p.key().rfind("dino_head.", 0) == 0) continue;  // the DINO head is trained from scratch
+        fail("{}: no tensor '{}' (the --init tokenizer has a different architecture)", opt.init.string(), p.key());
+      }
+      if (!q->sizes().equals(p.value().sizes()))
+        fail("{}: '{}' has shape {} but the config needs {}", opt.init.string(), p.key(), shape_str(q->sizes().vec()),
+             shape_str(p.value().sizes().vec()));
+      p.value().copy_(*q);
+    }
+    note("initialised from " + opt.init.string());
+  }
   fs::create_directories(opt.out);
   std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
 
@@ -170,7 +191,17 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     const bool gan = step >= tc.disc_start && tc.w_gan > 0;
     if (gan) {
       auto lg = hinge_g_loss(disc->forward(o.reconstruction));
-      loss = loss + tc.w_gan * lg;
+      double w = tc.w_gan;
+      if (tc.gan_adaptive) {
+        // VQGAN: ||d loss_rec / d W_last|| / ||d loss_gan / d W_last||, W_last = the decoder's output convolution.
+        auto last = model->decoder->conv_out->weight;
+        auto g_rec = torch::autograd::grad({loss}, {last}, {}, /*retain_graph=*/true)[0];
+        auto g_gan = torch::autograd::grad({lg}, {last}, {}, /*retain_graph=*/true)[0];
+        double lambda = std::clamp(g_rec.norm().item<double>() / (g_gan.norm().item<double>() + 1e-4), 0.0, 1e4);
+        w *= lambda;
+        terms["gan_weight"] = w;
+      }
+      loss = loss + w * lg;
       terms["gan_g"] = lg.item<double>();
     }
     if (!std::isfinite(loss.item<double>())) fail("tokenizer training diverged at step {} (loss is not finite)", step);
