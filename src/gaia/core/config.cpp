@@ -222,7 +222,8 @@ void Config::validate() const {
   need(tokenizer.codebook_size >= 2, "tokenizer.codebook_size must be >= 2");
   need(world.d_model % world.n_heads == 0, "world.d_model must be divisible by world.n_heads");
   need(world.action_tokens == 2, "world.action_tokens must be 2 (speed, curvature; paper §2.1)");
-  need(world.context_steps >= 1 && world.text_tokens >= 0, "world.context_steps >= 1 and world.text_tokens >= 0");
+  // m >= 1: the first image token of a step is predicted from the last text token before it.
+  need(world.context_steps >= 1 && world.text_tokens >= 1, "world.context_steps >= 1 and world.text_tokens >= 1");
   double p = world.p_uncond + world.p_action + world.p_text;
   need(p > 0.999 && p < 1.001, "world.p_uncond + p_action + p_text must be 1");
   need(data.balance_exponent >= 0 && data.balance_exponent <= 1, "data.balance_exponent must be in [0, 1]");

@@ -1,0 +1,141 @@
+#include "gaia/world/model.h"
+
+#include "gaia/core/error.h"
+
+namespace gaia::world {
+
+namespace F = torch::nn::functional;
+
+WorldModelImpl::WorldModelImpl(const WorldConfig& c, int64_t n, int64_t K_) : cfg(c), K(K_), d(c.d_model) {
+  if (c.action_tokens != 2) fail("world.action_tokens must be 2 (speed and curvature, paper §2.1), got {}", c.action_tokens);
+  if (n <= 0 || K <= 0) fail("world model needs n > 0 image tokens and K > 0 codes (got n = {}, K = {})", n, K);
+  if (c.d_model % c.n_heads != 0) fail("world.d_model {} is not divisible by world.n_heads {}", c.d_model, c.n_heads);
+  layout = SequenceLayout{c.text_tokens, n, c.action_tokens, c.context_steps};
+  token_embedding = register_module("token_embedding", torch::nn::Embedding(K, d));
+  word_embedding = register_module("word_embedding", torch::nn::Embedding(c.text_vocab, c.text_dim));
+  text_proj = register_module("text_proj", torch::nn::Linear(c.text_dim, d));
+  speed_proj = register_module("speed_proj", torch::nn::Linear(1, d));
+  curvature_proj = register_module("curvature_proj", torch::nn::Linear(1, d));
+  // GPT-2 style small-normal initialisation of the learned tokens and positions.
+  null_text = register_parameter("null_text", torch::randn({layout.m, d}) * 0.02);
+  null_action = register_parameter("null_action", torch::randn({layout.l, d}) * 0.02);
+  temporal_pos = register_parameter("temporal_pos", torch::randn({layout.T, d}) * 0.02);
+  spatial_pos = register_parameter("spatial_pos", torch::randn({layout.per_step(), d}) * 0.02);
+  blocks = register_module("blocks", torch::nn::ModuleList());
+  for (int i = 0; i < c.n_layers; ++i) blocks->push_back(Block(d, c.n_heads));
+  ln_f = register_module("ln_f", torch::nn::LayerNorm(torch::nn::LayerNormOptions({d})));
+  head = register_module("head", torch::nn::Linear(torch::nn::LinearOptions(d, K).bias(false)));
+  for (auto& p : named_parameters()) {
+    const auto& k = p.key();
+    torch::NoGradGuard ng;
+    if (k.find("weight") != std::string::npos && p.value().dim() == 2) p.value().normal_(0.0, 0.02);
+    if (k.find("bias") != std::string::npos) p.value().zero_();
+    // GPT-2: residual projections scaled by 1/sqrt(2 * layers) so the residual stream does not grow with depth.
+    if (k.find("proj.weight") != std::string::npos && k.find("blocks") != std::string::npos)
+      p.value().normal_(0.0, 0.02 / std::sqrt(2.0 * c.n_layers));
+  }
+}
+
+namespace {
+
+// Per-example switch: mask [B] bool -> where(mask, a, b) broadcast over the trailing dims of a.
+torch::Tensor choose(const torch::Tensor& mask, const torch::Tensor& a, const torch::Tensor& b) {
+  if (!mask.defined()) return a;
+  auto m = mask.to(a.device()).to(torch::kBool);
+  for (int64_t i = 1; i < a.dim(); ++i) m = m.unsqueeze(-1);
+  return torch::where(m, a, b);
+}
+
+}  // namespace
+
+torch::Tensor WorldModelImpl::embed_text(const WorldBatch& b, int64_t t0) {
+  const int64_t B = b.batch(), T = b.steps(), m = layout.m;
+  auto null = null_text.view({1, 1, m, d}).expand({B, T, m, d});
+  torch::Tensor feats;
+  if (b.text_emb.defined()) {
+    if (b.text_emb.size(2) != m || b.text_emb.size(3) != cfg.text_dim)
+      fail("text embeddings have shape [{}, {}, {}, {}] but the world model takes [B, T, m = {}, text_dim = {}]",
+           b.text_emb.size(0), b.text_emb.size(1), b.text_emb.size(2), b.text_emb.size(3), m, cfg.text_dim);
+    feats = b.text_emb;
+  } else if (b.text_ids.defined()) {
+    feats = word_embedding->forward(b.text_ids.clamp(0, cfg.text_vocab - 1));
+  }
+  auto x = feats.defined() ? choose(b.use_text, text_proj->forward(feats), null) : null;
+  return x + temporal_pos.narrow(0, t0, T).view({1, T, 1, d}) + spatial_pos.narrow(0, 0, m).view({1, 1, m, d});
+}
+
+torch::Tensor WorldModelImpl::embed_image(const torch::Tensor& tokens, int64_t t0, int64_t slot0) {
+  const int64_t B = tokens.size(0), T = tokens.size(1), k = tokens.size(2);
+  return token_embedding->forward(tokens) + temporal_pos.narrow(0, t0, T).view({1, T, 1, d}) +
+         spatial_pos.narrow(0, layout.image_slot(slot0), k).view({1, 1, k, d}).expand({B, T, k, d});
+}
+
+torch::Tensor WorldModelImpl::embed_actions(const WorldBatch& b, int64_t t0) {
+  const int64_t B = b.batch(), T = b.steps(), l = layout.l;
+  auto null = null_action.view({1, 1, l, d}).expand({B, T, l, d});
+  torch::Tensor x = null;
+  if (b.actions.defined()) {
+    auto a = b.actions.to(torch::kFloat);
+    auto missing = torch::isnan(a);                          // [B, T, 2]
+    auto a0 = torch::where(missing, torch::zeros_like(a), a);  // keep NaN out of the graph
+    auto e = torch::stack({speed_proj->forward(a0.narrow(2, 0, 1)), curvature_proj->forward(a0.narrow(2, 1, 1))},
+                          2);                                // [B, T, 2, d]
+    x = torch::where(missing.unsqueeze(-1), null, e);
+    x = choose(b.use_action, x, null);
+  }
+  return x + temporal_pos.narrow(0, t0, T).view({1, T, 1, d}) +
+         spatial_pos.narrow(0, layout.action_slot(0), l).view({1, 1, l, d});
+}
+
+torch::Tensor WorldModelImpl::embed(const WorldBatch& b, int64_t t0) {
+  const int64_t B = b.batch(), T = b.steps();
+  if (t0 + T > layout.T) fail("{} steps from temporal position {} exceed the context of {} steps", T, t0, layout.T);
+  if (b.tokens.size(2) != layout.n)
+    fail("image tokens have {} per frame but the world model was built for n = {}", b.tokens.size(2), layout.n);
+  auto x = torch::cat({embed_text(b, t0), embed_image(b.tokens, t0), embed_actions(b, t0)}, 2);  // [B, T, S, d]
+  return x.reshape({B, T * layout.per_step(), d});
+}
+
+torch::Tensor WorldModelImpl::body(const torch::Tensor& x, KVCache* cache) {
+  auto h = x;
+  int i = 0;
+  for (auto& blk : *blocks) h = blk->as<Block>()->forward(h, cache, i++);
+  if (cache) cache->length += x.size(1);
+  return ln_f->forward(h);
+}
+
+torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
+  const int64_t B = b.batch(), T = b.steps(), n = layout.n;
+  auto h = body(embed(b));  // [B, T * S, d]
+  // Only the n outputs per step that predict image tokens go through the head (eq. 1 has no other terms).
+  std::vector<int64_t> idx;
+  idx.reserve(static_cast<size_t>(T * n));
+  for (int64_t t = 0; t < T; ++t)
+    for (int64_t i = 0; i < n; ++i) idx.push_back(layout.predictor(t, i));
+  auto sel = torch::tensor(idx, torch::TensorOptions().dtype(torch::kLong)).to(h.device());
+  return logits(h.index_select(1, sel)).view({B, T, n, K});
+}
+
+KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity) const {
+  KVCache c;
+  const int64_t H = cfg.n_heads, hd = d / H;
+  auto opts = token_embedding->weight.options().requires_grad(false);
+  for (int i = 0; i < cfg.n_layers; ++i) {
+    c.k.push_back(torch::empty({batch, H, capacity, hd}, opts));
+    c.v.push_back(torch::empty({batch, H, capacity, hd}, opts));
+  }
+  return c;
+}
+
+int64_t WorldModelImpl::parameter_count(bool with_word_embedding) const {
+  int64_t total = 0;
+  for (const auto& p : named_parameters())
+    if (with_word_embedding || p.key().rfind("word_embedding.", 0) != 0) total += p.value().numel();
+  return total;
+}
+
+torch::Tensor image_token_loss(const torch::Tensor& logits, const torch::Tensor& tokens) {
+  return F::cross_entropy(logits.reshape({-1, logits.size(-1)}), tokens.reshape({-1}).to(torch::kLong));
+}
+
+}  // namespace gaia::world

@@ -1,0 +1,143 @@
+#include "gaia/world/rollout.h"
+
+#include <chrono>
+
+#include "gaia/core/error.h"
+
+namespace gaia::world {
+
+namespace {
+
+// Step conditioning for rows [cond x N | uncond x N] (or just cond x N) over global steps [k0, k1).
+struct Conditioner {
+  const RolloutPrompt& p;
+  int64_t N;
+  bool guided;
+  torch::Device dev;
+
+  torch::Tensor rows(const torch::Tensor& per_step, int64_t k0, int64_t k1, const torch::Tensor& uncond) const {
+    // per_step [P + F, ...] -> [B, k1 - k0, ...]; the uncond half uses `uncond` when defined, else a copy.
+    auto s = per_step.narrow(0, k0, k1 - k0).unsqueeze(0);
+    std::vector<int64_t> rep(static_cast<size_t>(s.dim()), 1);
+    rep[0] = N;
+    auto c = s.repeat(rep);
+    if (!guided) return c.to(dev);
+    auto u = uncond.defined() ? uncond.narrow(0, k0, k1 - k0).unsqueeze(0).repeat(rep) : c;
+    return torch::cat({c, u}, 0).to(dev);
+  }
+
+  WorldBatch at(int64_t k0, int64_t k1, const torch::Tensor& tokens) const {
+    WorldBatch b;
+    b.tokens = tokens;
+    const int64_t B = guided ? 2 * N : N;
+    auto cond_rows = torch::arange(B) < N;  // [B] true for the conditional half
+    if (p.actions.defined()) {
+      b.actions = rows(p.actions, k0, k1, {});
+      b.use_action = cond_rows.to(dev);
+    }
+    const bool neg = p.negative_text_ids.defined() || p.negative_text_emb.defined();
+    if (p.text_emb.defined() || p.negative_text_emb.defined()) {
+      auto base = p.text_emb.defined() ? p.text_emb : torch::zeros_like(p.negative_text_emb);
+      b.text_emb = rows(base, k0, k1, p.negative_text_emb);
+    } else if (p.text_ids.defined() || p.negative_text_ids.defined()) {
+      auto base = p.text_ids.defined() ? p.text_ids : torch::zeros_like(p.negative_text_ids);
+      b.text_ids = rows(base, k0, k1, p.negative_text_ids);
+    }
+    if (b.text_emb.defined() || b.text_ids.defined()) {
+      // cond rows see the prompt text (null if there is none); uncond rows the negative prompt (null if none).
+      const bool has_pos = p.text_emb.defined() || p.text_ids.defined();
+      b.use_text = torch::cat({torch::full({N}, has_pos), torch::full({B - N}, neg)}).to(torch::kBool).to(dev);
+    }
+    return b;
+  }
+};
+
+void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t P, int64_t steps) {
+  const auto& L = m.layout;
+  if (p.tokens.defined() && p.tokens.numel() > 0) {
+    if (p.tokens.dim() != 2 || p.tokens.size(1) != L.n)
+      fail("prompt tokens must be [frames, n = {}] (got {} dims, {} per frame)", L.n, p.tokens.dim(),
+           p.tokens.dim() == 2 ? p.tokens.size(1) : -1);
+    if (p.tokens.min().item<int64_t>() < 0 || p.tokens.max().item<int64_t>() >= m.K)
+      fail("prompt tokens must be in [0, K = {}) (found {}..{})", m.K, p.tokens.min().item<int64_t>(),
+           p.tokens.max().item<int64_t>());
+  }
+  if (P > L.T) fail("the prompt has {} frames but the context holds {} steps (world.context_steps)", P, L.T);
+  auto rows_ok = [&](const torch::Tensor& t, const char* what, int64_t width) {
+    if (!t.defined()) return;
+    if (t.size(0) != steps || (width > 0 && t.size(1) != width))
+      fail("{} has {} rows of {} but the rollout needs {} rows (prompt + generated frames) of {}", what, t.size(0),
+           t.dim() > 1 ? t.size(1) : 0, steps, width);
+  };
+  rows_ok(p.actions, "actions", 2);
+  rows_ok(p.text_ids, "text ids", L.m);
+  rows_ok(p.text_emb, "text embeddings", L.m);
+  rows_ok(p.negative_text_ids, "negative text ids", L.m);
+  rows_ok(p.negative_text_emb, "negative text embeddings", L.m);
+}
+
+}  // namespace
+
+RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
+                      const std::function<void(int, int)>& on_frame) {
+  auto t_start = std::chrono::steady_clock::now();
+  torch::NoGradGuard ng;
+  model->eval();
+  const auto& L = model->layout;
+  const int64_t P = prompt.tokens.defined() ? prompt.tokens.size(0) : 0, F = o.frames, steps = P + F;
+  if (F < 0 || o.futures < 1) fail("rollout needs frames >= 0 and futures >= 1 (got {} and {})", F, o.futures);
+  check_prompt(*model, prompt, P, steps);
+  const torch::Device dev = model->token_embedding->weight.device();
+  const int64_t N = o.futures;
+  const bool guided = o.guidance.active();
+  const int64_t B = guided ? 2 * N : N, n = L.n, d = model->d;
+  Conditioner cond{prompt, N, guided, dev};
+  auto gen = at::detail::createCPUGenerator(o.seed);
+
+  auto all = torch::zeros({B, steps, n}, torch::TensorOptions().dtype(torch::kLong).device(dev));
+  if (P > 0) all.narrow(1, 0, P).copy_(prompt.tokens.to(dev).unsqueeze(0).expand({B, P, n}));
+  KVCache cache = model->make_cache(B, L.length());
+  int64_t win = 0;      // steps in the cache; the current step sits at temporal position `win`
+  int64_t first = 0;    // global index of the cache's first step
+  for (int64_t k = 0; k < steps; ++k) {
+    if (win == L.T) {
+      // Sliding window: keep the last T - 1 steps, re-embedded at temporal positions 0..T-2.
+      first = k - (L.T - 1);
+      cache.reset();
+      auto hist = cond.at(first, k, all.narrow(1, first, k - first));
+      model->body(model->embed(hist, 0), &cache);
+      win = L.T - 1;
+    }
+    if (k < P) {  // a prompt frame: the whole step at once
+      model->body(model->embed(cond.at(k, k + 1, all.narrow(1, k, 1)), win), &cache);
+      ++win;
+      continue;
+    }
+    auto sb = cond.at(k, k + 1, all.narrow(1, k, 1));
+    auto h = model->body(model->embed_text(sb, win).view({B, L.m, d}), &cache);
+    auto last = h.select(1, h.size(1) - 1);  // [B, d]
+    for (int64_t i = 0; i < n; ++i) {
+      auto lg = model->logits(last);  // [B, K]
+      torch::Tensor tok;
+      if (guided) {
+        auto l = guide(lg.narrow(0, 0, N), lg.narrow(0, N, N), o.guidance.at(int(k - P), int(i), int(n)));
+        tok = sample_tokens(l, o.sampling, gen);
+        tok = torch::cat({tok, tok});  // both halves continue from the same chosen token
+      } else {
+        tok = sample_tokens(lg, o.sampling, gen);
+      }
+      all.select(1, k).select(1, i).copy_(tok);
+      h = model->body(model->embed_image(tok.view({B, 1, 1}), win, i).view({B, 1, d}), &cache);
+      last = h.select(1, 0);
+    }
+    model->body(model->embed_actions(sb, win).view({B, L.l, d}), &cache);
+    ++win;
+    if (on_frame) on_frame(int(k - P + 1), int(F));
+  }
+  RolloutResult r;
+  r.tokens = all.narrow(0, 0, N).to(torch::kCPU);
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  return r;
+}
+
+}  // namespace gaia::world

@@ -1,0 +1,42 @@
+#pragma once
+// Rolling out futures (§2.3, §5.1): KV-cached incremental decoding of image tokens frame by frame, n forward steps
+// per frame, with classifier-free guidance (conditional and unconditional rows in one batch) and a sliding window
+// for rollouts longer than the context (drop the oldest step, re-index the temporal positions).
+#include <functional>
+
+#include <torch/torch.h>
+
+#include "gaia/world/guidance.h"
+#include "gaia/world/model.h"
+#include "gaia/world/sampling.h"
+
+namespace gaia::world {
+
+struct RolloutPrompt {
+  torch::Tensor tokens;             // [P, n] int64 prompt frames (undefined or P = 0: from scratch)
+  // Conditioning for every step, prompt and generated (P + F rows each); undefined = none (null tokens).
+  torch::Tensor actions;            // [P + F, 2] normalised (batch.h), NaN = no action at that step
+  torch::Tensor text_ids;           // [P + F, m] built-in text encoder ids
+  torch::Tensor text_emb;           // [P + F, m, text_dim] precomputed text embeddings
+  // Negative prompt (§5.1): the unconditional branch sees this text instead of the null text.
+  torch::Tensor negative_text_ids;  // [P + F, m]
+  torch::Tensor negative_text_emb;  // [P + F, m, text_dim]
+};
+
+struct RolloutOptions {
+  int frames = 8;                   // F frames to generate after the prompt
+  int futures = 1;                  // N futures sampled in one batch
+  SamplingOptions sampling;
+  GuidanceSchedule guidance;        // scale 0: no guidance, a single conditional pass
+  uint64_t seed = 0;
+};
+
+struct RolloutResult {
+  torch::Tensor tokens;             // [N, P + F, n] prompt followed by the generated frames
+  double seconds = 0;               // wall time of the rollout
+};
+
+RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
+                      const std::function<void(int generated, int total)>& on_frame = {});
+
+}  // namespace gaia::world

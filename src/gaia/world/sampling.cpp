@@ -1,0 +1,58 @@
+#include "gaia/world/sampling.h"
+
+#include "gaia/core/error.h"
+
+namespace gaia::world {
+
+Strategy parse_strategy(const std::string& s) {
+  if (s == "argmax") return Strategy::Argmax;
+  if (s == "sample") return Strategy::Sample;
+  if (s == "top-k" || s == "topk") return Strategy::TopK;
+  if (s == "top-p" || s == "topp") return Strategy::TopP;
+  fail("unknown sampling strategy '{}' (choose argmax, sample, top-k or top-p)", s);
+}
+
+std::string to_string(Strategy s) {
+  switch (s) {
+    case Strategy::Argmax: return "argmax";
+    case Strategy::Sample: return "sample";
+    case Strategy::TopK: return "top-k";
+    case Strategy::TopP: return "top-p";
+  }
+  return "?";
+}
+
+torch::Tensor sampling_distribution(const torch::Tensor& logits_in, const SamplingOptions& o) {
+  auto logits = logits_in.to(torch::kFloat);
+  const int64_t K = logits.size(-1);
+  if (o.strategy == Strategy::Argmax)
+    return torch::zeros_like(logits).scatter_(-1, logits.argmax(-1, true), 1.0);
+  if (!(o.temperature > 0)) fail("temperature must be > 0 (got {})", o.temperature);
+  logits = logits / o.temperature;
+  const float neg_inf = -std::numeric_limits<float>::infinity();
+  if (o.strategy == Strategy::TopK) {
+    if (o.top_k < 1) fail("top_k must be >= 1 (got {})", o.top_k);
+    const int64_t k = std::min<int64_t>(o.top_k, K);
+    // Keep exactly the k highest by rank (a threshold on the k-th value would let ties through).
+    auto top = std::get<1>(logits.topk(k, -1));
+    auto keep = torch::zeros_like(logits, torch::kBool).scatter_(-1, top, true);
+    logits = logits.masked_fill(~keep, neg_inf);
+  } else if (o.strategy == Strategy::TopP) {
+    if (!(o.top_p > 0 && o.top_p <= 1)) fail("top_p must be in (0, 1] (got {})", o.top_p);
+    auto sorted = logits.sort(-1, /*descending=*/true);
+    auto probs = torch::softmax(std::get<0>(sorted), -1);
+    auto before = probs.cumsum(-1) - probs;  // mass strictly above each token
+    auto drop_sorted = before >= o.top_p;     // keeps the smallest prefix reaching top_p (always >= 1 token)
+    auto drop = torch::zeros_like(drop_sorted).scatter_(-1, std::get<1>(sorted), drop_sorted);
+    logits = logits.masked_fill(drop, neg_inf);
+  }
+  return torch::softmax(logits, -1);
+}
+
+torch::Tensor sample_tokens(const torch::Tensor& logits, const SamplingOptions& o, torch::Generator& gen) {
+  if (o.strategy == Strategy::Argmax) return logits.argmax(-1);
+  auto p = sampling_distribution(logits, o);
+  return torch::multinomial(p.to(torch::kCPU), 1, false, gen).squeeze(-1).to(logits.device());
+}
+
+}  // namespace gaia::world

@@ -1,0 +1,27 @@
+#pragma once
+// Choosing the next image token from logits (§5.1, Fig. 5): argmax, sampling from the full distribution, top-k
+// (the paper's choice, k = 50) and, as an extra, top-p (nucleus). Temperature divides the logits first.
+#include <string>
+
+#include <torch/torch.h>
+
+namespace gaia::world {
+
+enum class Strategy { Argmax, Sample, TopK, TopP };
+Strategy parse_strategy(const std::string& s);  // "argmax" | "sample" | "top-k" | "top-p"; errors list the choices
+std::string to_string(Strategy s);
+
+struct SamplingOptions {
+  Strategy strategy = Strategy::TopK;
+  int top_k = 50;            // paper §5.1
+  double top_p = 0.9;
+  double temperature = 1.0;
+};
+
+// logits [B, K] -> token ids [B] (int64). Random draws come from `gen` only, so rollouts are reproducible.
+torch::Tensor sample_tokens(const torch::Tensor& logits, const SamplingOptions& o, torch::Generator& gen);
+
+// The filtered, renormalised distribution sample_tokens draws from: [B, K] probabilities (argmax: one-hot).
+torch::Tensor sampling_distribution(const torch::Tensor& logits, const SamplingOptions& o);
+
+}  // namespace gaia::world

@@ -1,0 +1,39 @@
+#pragma once
+// The GPT body of the world model (§2.3, nanoGPT-style): pre-LN blocks of causal self-attention and a 4d MLP.
+// Attention keeps an optional key/value cache so that sampling runs one token at a time (§5.1) without
+// recomputing the context.
+#include <vector>
+
+#include <torch/torch.h>
+
+namespace gaia::world {
+
+// Keys and values of every layer for the tokens seen so far, preallocated to a capacity (the context length), so
+// appending a token writes in place instead of copying the cache.
+struct KVCache {
+  std::vector<torch::Tensor> k, v;  // per layer [B, H, capacity, hd]
+  int64_t length = 0;               // tokens cached
+  int64_t capacity() const { return k.empty() ? 0 : k[0].size(2); }
+  void reset() { length = 0; }
+};
+
+struct CausalSelfAttentionImpl : torch::nn::Module {
+  CausalSelfAttentionImpl(int64_t d, int64_t heads);
+  // x [B, L, d] -> [B, L, d]. Without a cache the L tokens attend causally among themselves. With a cache they
+  // are appended after cache.length tokens and attend to all of those plus causally among themselves.
+  torch::Tensor forward(const torch::Tensor& x, KVCache* cache = nullptr, int layer = 0);
+  int64_t heads, d;
+  torch::nn::Linear qkv{nullptr}, proj{nullptr};
+};
+TORCH_MODULE(CausalSelfAttention);
+
+struct BlockImpl : torch::nn::Module {
+  BlockImpl(int64_t d, int64_t heads);
+  torch::Tensor forward(const torch::Tensor& x, KVCache* cache = nullptr, int layer = 0);  // [B, L, d] -> same
+  torch::nn::LayerNorm ln1{nullptr}, ln2{nullptr};
+  CausalSelfAttention attn{nullptr};
+  torch::nn::Linear fc{nullptr}, fc_proj{nullptr};
+};
+TORCH_MODULE(Block);
+
+}  // namespace gaia::world

@@ -1,0 +1,254 @@
+// World model (§2.1, §2.3, §5.1): causality, loss placement, KV cache = full forward, sliding window, guidance,
+// sampling strategies, parameter count against the plan, and bad prompts.
+#include <set>
+
+#include <torch/torch.h>
+
+#include "gaia/core/config.h"
+#include "gaia/plan/plan.h"
+#include "gaia/world/guidance.h"
+#include "gaia/world/model.h"
+#include "gaia/world/rollout.h"
+#include "gaia/world/sampling.h"
+#include "test_util.h"
+
+using namespace gaia;
+using namespace gaia::world;
+
+namespace {
+
+Config tiny() { return Config::load(test::source_dir() / "configs" / "tiny.yaml"); }
+
+constexpr int64_t kN = 6, kK = 32;
+
+WorldModel small_model(const Config& c, uint64_t seed = 0) {
+  torch::manual_seed(seed);
+  WorldModel m(c.world, kN, kK);
+  m->eval();
+  return m;
+}
+
+WorldBatch random_batch(const Config& c, int64_t B, int64_t T, uint64_t seed = 1) {
+  torch::manual_seed(seed);
+  WorldBatch b;
+  b.tokens = torch::randint(0, kK, {B, T, kN}, torch::kLong);
+  b.actions = torch::randn({B, T, 2});
+  b.text_ids = torch::randint(0, c.world.text_vocab, {B, T, c.world.text_tokens}, torch::kLong);
+  return b;
+}
+
+}  // namespace
+
+TEST(WorldModel, LogitsAreCausal) {
+  Config c = tiny();
+  auto m = small_model(c);
+  torch::NoGradGuard ng;
+  auto b = random_batch(c, 1, 3);
+  auto base = m->forward(b);  // [1, 3, n, K]
+  // Change image token z_{1,2}: logits of every token predicted before it stay, the ones after it move.
+  auto b2 = b;
+  b2.tokens = b.tokens.clone();
+  b2.tokens[0][1][2] = (b.tokens[0][1][2].item<int64_t>() + 1) % kK;
+  auto changed = m->forward(b2);
+  const auto& L = m->layout;
+  const int64_t pos = L.flat(1, L.image_slot(2));
+  for (int64_t t = 0; t < 3; ++t)
+    for (int64_t i = 0; i < kN; ++i) {
+      bool same = torch::allclose(base[0][t][i], changed[0][t][i], 0, 0);
+      if (L.predictor(t, i) < pos) EXPECT_TRUE(same) << "t " << t << " i " << i;
+      else EXPECT_FALSE(same) << "t " << t << " i " << i;
+    }
+  // Actions of step 1 come after its image: they change step 2 only.
+  auto b3 = b;
+  b3.actions = b.actions.clone();
+  b3.actions[0][1][1] += 1.0;
+  auto a = m->forward(b3);
+  EXPECT_TRUE(torch::equal(a.narrow(1, 0, 2), base.narrow(1, 0, 2)));
+  EXPECT_FALSE(torch::allclose(a[0][2], base[0][2]));
+}
+
+TEST(WorldModel, LossIsOnImageTokensOnly) {
+  Config c = tiny();
+  auto m = small_model(c);
+  torch::NoGradGuard ng;
+  auto b = random_batch(c, 2, 2);
+  auto logits = m->forward(b);
+  ASSERT_EQ(logits.sizes(), (std::vector<int64_t>{2, 2, kN, kK}));
+  // The same numbers from the head over every position, gathered at the image-token predictors by hand.
+  auto all = m->logits(m->body(m->embed(b)));  // [B, T * S, K]
+  double manual = 0;
+  const auto& L = m->layout;
+  for (int64_t bb = 0; bb < 2; ++bb)
+    for (int64_t t = 0; t < 2; ++t)
+      for (int64_t i = 0; i < kN; ++i) {
+        auto lp = torch::log_softmax(all[bb][L.predictor(t, i)], -1);
+        manual -= lp[b.tokens[bb][t][i].item<int64_t>()].item<double>();
+      }
+  manual /= 2 * 2 * kN;
+  EXPECT_NEAR(image_token_loss(logits, b.tokens).item<double>(), manual, 1e-5);
+  // A random model starts near log K.
+  EXPECT_NEAR(manual, std::log(double(kK)), 0.5);
+}
+
+TEST(WorldModel, KvCacheMatchesFullForward) {
+  Config c = tiny();
+  auto m = small_model(c);
+  torch::NoGradGuard ng;
+  auto b = random_batch(c, 2, c.world.context_steps);
+  auto x = m->embed(b);  // [B, L, d]
+  auto full = m->logits(m->body(x));
+  auto cache = m->make_cache(2, m->layout.length());
+  std::vector<torch::Tensor> parts;
+  // Feed in uneven chunks (1 token, then 3, then the rest one by one) as the sampler does.
+  int64_t p = 0;
+  for (int64_t len : {int64_t(1), int64_t(3)}) {
+    parts.push_back(m->logits(m->body(x.narrow(1, p, len), &cache)));
+    p += len;
+  }
+  for (; p < x.size(1); ++p) parts.push_back(m->logits(m->body(x.narrow(1, p, 1), &cache)));
+  auto inc = torch::cat(parts, 1);
+  EXPECT_EQ(cache.length, x.size(1));
+  EXPECT_LT((inc - full).abs().max().item<double>(), 1e-4);
+}
+
+TEST(WorldModel, ParameterCountEqualsThePlan) {
+  for (auto name : {"tiny.yaml", "default.yaml"}) {
+    Config c = Config::load(test::source_dir() / "configs" / name);
+    WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+    EXPECT_EQ(m->parameter_count(/*with_word_embedding=*/false), plan::world_params(c).total) << name;
+  }
+}
+
+TEST(WorldSampling, TopKNeverLeavesTheTopK) {
+  torch::manual_seed(3);
+  auto logits = torch::randn({4, 100});
+  SamplingOptions o;
+  o.strategy = Strategy::TopK;
+  o.top_k = 5;
+  auto gen = at::detail::createCPUGenerator(7);
+  auto top = std::get<1>(logits.topk(5, -1));
+  std::set<int64_t> seen;
+  for (int r = 0; r < 300; ++r) {
+    auto s = sample_tokens(logits, o, gen);
+    for (int64_t b = 0; b < 4; ++b) {
+      int64_t v = s[b].item<int64_t>();
+      EXPECT_TRUE((top[b] == v).any().item<bool>());
+      if (b == 0) seen.insert(v);
+    }
+  }
+  EXPECT_EQ(seen.size(), 5u);  // and it does sample, not just take the argmax
+  // Argmax, top-p and temperature.
+  o.strategy = Strategy::Argmax;
+  EXPECT_TRUE(torch::equal(sample_tokens(logits, o, gen), logits.argmax(-1)));
+  o.strategy = Strategy::TopP;
+  o.top_p = 0.5;
+  auto p = sampling_distribution(logits, o);
+  auto full = torch::softmax(logits, -1);
+  for (int64_t b = 0; b < 4; ++b) {
+    auto kept = p[b] > 0;
+    double mass = full[b].masked_select(kept).sum().item<double>();
+    EXPECT_GE(mass, 0.5);
+    // Dropping the least likely kept token would fall below top_p: the nucleus is minimal.
+    double smallest = full[b].masked_select(kept).min().item<double>();
+    EXPECT_LT(mass - smallest, 0.5);
+  }
+  o.strategy = Strategy::Sample;
+  o.temperature = 0.5;
+  EXPECT_TRUE(torch::allclose(sampling_distribution(logits, o), torch::softmax(logits / 0.5, -1), 1e-5, 1e-6));
+  EXPECT_NE(test::error_of([] { parse_strategy("greedy"); }).find("greedy"), std::string::npos);
+}
+
+TEST(WorldGuidance, FormulaAndSchedules) {
+  auto c = torch::tensor({1.0, 2.0}), u = torch::tensor({0.5, 3.0});
+  EXPECT_TRUE(torch::allclose(guide(c, u, 2.0), torch::tensor({3.0 * 1.0 - 2.0 * 0.5, 3.0 * 2.0 - 2.0 * 3.0})));
+  GuidanceSchedule g;
+  g.scale = 4;
+  EXPECT_DOUBLE_EQ(g.at(3, 7, 10), 4);
+  g.tokens = GuidanceSchedule::Tokens::Linear;
+  EXPECT_DOUBLE_EQ(g.at(0, 0, 10), 4);
+  EXPECT_DOUBLE_EQ(g.at(0, 9, 10), 0);
+  EXPECT_NEAR(g.at(0, 3, 10), 4 * (1 - 3.0 / 9), 1e-12);
+  g.tokens = GuidanceSchedule::Tokens::Constant;
+  g.frames = GuidanceSchedule::Frames::Cosine;
+  g.plateau = 2;
+  g.total_frames = 8;
+  EXPECT_DOUBLE_EQ(g.at(0, 0, 10), 4);
+  EXPECT_DOUBLE_EQ(g.at(2, 0, 10), 4);
+  EXPECT_NEAR(g.at(7, 0, 10), 0, 1e-12);
+  for (int f = 2; f < 7; ++f) EXPECT_GT(g.at(f, 0, 10), g.at(f + 1, 0, 10));
+  EXPECT_NEAR(g.at(4, 0, 10), 4 * 0.5 * (1 + std::cos(M_PI * 2 / 5.0)), 1e-12);  // u = (4 - 2) / (8 - 2 - 1)
+}
+
+// Every generated frame must be the argmax of a full forward over the window the sampler saw: the last T steps
+// (or all steps before the window fills). This checks the KV cache and the sliding window's re-indexed positions.
+TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
+  Config c = tiny();
+  auto m = small_model(c, 5);
+  const int64_t T = c.world.context_steps, P = 2, F = T + 3;
+  RolloutPrompt p;
+  torch::manual_seed(9);
+  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.actions = torch::randn({P + F, 2});
+  p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.sampling.strategy = Strategy::Argmax;
+  auto r = rollout(m, p, o);
+  ASSERT_EQ(r.tokens.sizes(), (std::vector<int64_t>{1, P + F, kN}));
+  EXPECT_TRUE(torch::equal(r.tokens[0].narrow(0, 0, P), p.tokens));
+  torch::NoGradGuard ng;
+  for (int64_t k = P; k < P + F; ++k) {
+    const int64_t k0 = std::max<int64_t>(0, k - T + 1);
+    WorldBatch b;
+    b.tokens = r.tokens.narrow(1, k0, k - k0 + 1);
+    b.actions = p.actions.narrow(0, k0, k - k0 + 1).unsqueeze(0);
+    b.text_ids = p.text_ids.narrow(0, k0, k - k0 + 1).unsqueeze(0);
+    auto want = m->forward(b).select(1, k - k0).argmax(-1);  // [1, n]
+    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k;
+  }
+}
+
+TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {
+  Config c = tiny();
+  auto m = small_model(c, 6);
+  const int64_t F = 3;
+  RolloutPrompt p;
+  torch::manual_seed(2);
+  p.text_ids = torch::randint(2, c.world.text_vocab, {F, c.world.text_tokens}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.futures = 2;
+  o.sampling.strategy = Strategy::Argmax;
+  auto plain = rollout(m, p, o);
+  // A negative prompt equal to the prompt: l_cond == l_uncond, so any guidance scale gives the same tokens.
+  auto q = p;
+  q.negative_text_ids = p.text_ids;
+  o.guidance.scale = 5;
+  auto same = rollout(m, q, o);
+  EXPECT_TRUE(torch::equal(plain.tokens, same.tokens));
+  // Real guidance against the null text changes the argmax path.
+  auto guided = rollout(m, p, o);
+  EXPECT_FALSE(torch::equal(plain.tokens, guided.tokens));
+  // Futures differ under sampling, and a seed reproduces them.
+  o.guidance.scale = 0;
+  o.sampling.strategy = Strategy::Sample;
+  o.seed = 4;
+  auto s1 = rollout(m, p, o), s2 = rollout(m, p, o);
+  EXPECT_TRUE(torch::equal(s1.tokens, s2.tokens));
+  EXPECT_FALSE(torch::equal(s1.tokens[0], s1.tokens[1]));
+}
+
+TEST(WorldRollout, BadPromptsAreClearErrors) {
+  Config c = tiny();
+  auto m = small_model(c);
+  RolloutOptions o;
+  o.frames = 2;
+  RolloutPrompt p;
+  p.tokens = torch::zeros({c.world.context_steps + 1, kN}, torch::kLong);
+  EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("context"), std::string::npos);
+  p.tokens = torch::full({1, kN}, kK, torch::kLong);
+  EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("K = 32"), std::string::npos);
+  p.tokens = torch::zeros({1, kN}, torch::kLong);
+  p.actions = torch::zeros({2, 2});  // needs 1 + 2 rows
+  EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("actions has 2 rows"), std::string::npos);
+}
