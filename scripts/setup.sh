@@ -5,6 +5,7 @@ set -euo pipefail
 PKGS=(
   build-essential cmake ninja-build ccache pkg-config
   libtorch-dev                 # LibTorch 1.13 (CPU); find_package(Torch)
+  libopenblas0-pthread         # fast BLAS for LibTorch's matrix products (the default reference BLAS is ~10x slower)
   libopencv-dev                # image / video I/O (FFmpeg backend)
   ffmpeg                       # video codecs used by OpenCV's FFmpeg backend
   libcli11-dev                 # command-line parsing
@@ -12,7 +13,7 @@ PKGS=(
   nlohmann-json3-dev           # safetensors headers, JSONL metrics
   libfmt-dev libspdlog-dev     # formatting and logging
   libgtest-dev libgmock-dev libbenchmark-dev
-  xz-utils zstd                # compressors used as floors in world-model evaluation
+  liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)
 )
 
 missing=()

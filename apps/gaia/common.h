@@ -34,5 +34,7 @@ void register_ingest(CLI::App& app);
 void register_data(CLI::App& app);
 void register_synth(CLI::App& app);
 void register_tokenizer(CLI::App& app);  // also registers `gaia tokenize`
+void register_world(CLI::App& app);
+void register_generate(CLI::App& app);
 
 }  // namespace gaia::app

@@ -19,6 +19,8 @@ int main(int argc, char** argv) {
   gaia::app::register_data(app);
   gaia::app::register_synth(app);
   gaia::app::register_tokenizer(app);
+  gaia::app::register_world(app);
+  gaia::app::register_generate(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

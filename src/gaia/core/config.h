@@ -51,7 +51,7 @@ struct WorldConfig {
   int n_layers = 6;              // paper-scale 6.5B implies 32 layers at d = 4096 (12 d^2 per layer)
   int n_heads = 8;
   int context_steps = 8;         // T; paper §4.2: T = 26 steps at 6.25 Hz (4 s)
-  int text_tokens = 4;           // m; paper §2.1: m = 32 T5-large tokens per step
+  int text_tokens = 16;          // m; paper §2.1: m = 32 T5-large tokens per step (synth captions: ~14 words)
   int text_dim = 128;            // width of text embeddings fed to the linear layer (T5-large: 1024)
   int text_vocab = 2048;         // built-in word vocabulary size
   int action_tokens = 2;         // l; paper §2.1: speed and curvature

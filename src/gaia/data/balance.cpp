@@ -16,13 +16,11 @@ const std::vector<std::string> kCategorical{"weather", "time_of_day", "steering"
 
 bool is_numeric(const std::string& f) { return std::find(kNumeric.begin(), kNumeric.end(), f) != kNumeric.end(); }
 
-double mean_present(const std::vector<float>& v, const std::vector<int64_t>& idx) {
+double mean_present(const std::vector<float>& v) {
   double s = 0;
   int n = 0;
-  for (auto i : idx) {
-    float x = v[static_cast<size_t>(i)];
+  for (float x : v)
     if (!std::isnan(x)) { s += x; ++n; }
-  }
   return n ? s / n : std::nan("");
 }
 }  // namespace
@@ -42,13 +40,21 @@ bool is_known_feature(const std::string& f) {
 }
 
 FeatureRow clip_features(const Episode& ep, const std::vector<int64_t>& frames) {
+  std::vector<float> v, k;
+  for (auto i : frames) {
+    v.push_back(ep.speeds()[static_cast<size_t>(i)]);
+    k.push_back(ep.curvatures()[static_cast<size_t>(i)]);
+  }
+  return example_features(ep.meta(), v, k);
+}
+
+FeatureRow example_features(const EpisodeMeta& m, const std::vector<float>& speeds, const std::vector<float>& curvatures) {
   FeatureRow r;
-  const auto& m = ep.meta();
   r.cat["weather"] = m.weather.empty() ? "missing" : m.weather;
   r.cat["time_of_day"] = m.time_of_day.empty() ? "missing" : m.time_of_day;
   r.num["latitude"] = m.latitude;
   r.num["longitude"] = m.longitude;
-  double v = mean_present(ep.speeds(), frames), k = mean_present(ep.curvatures(), frames);
+  double v = mean_present(speeds), k = mean_present(curvatures);
   r.num["speed"] = v;
   r.num["curvature"] = k;
   r.cat["steering"] = std::isnan(k) ? "missing" : k > kStraight ? "left" : k < -kStraight ? "right" : "straight";

@@ -23,6 +23,9 @@ struct FeatureRow {
 // curvature (mean 1/m) (numeric); steering (left/straight/right) and speed_category (stopped/slow/medium/fast)
 // as behaviour categories.
 FeatureRow clip_features(const Episode& ep, const std::vector<int64_t>& frames);
+// The same features from an episode's metadata and the speeds / curvatures of the example's steps (NaN = missing):
+// clips of frames and world-model windows of token steps share one definition of "left" or "fast".
+FeatureRow example_features(const EpisodeMeta& meta, const std::vector<float>& speeds, const std::vector<float>& curvatures);
 bool is_known_feature(const std::string& name);
 const std::vector<std::string>& known_features();
 

@@ -54,28 +54,38 @@ Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, doubl
       s.val_geofence.push_back(m.id);
       continue;
     }
-    // Hash of (seed, id): the decision for an episode does not change when others are added.
-    uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
-    for (unsigned char c : m.id) h = (h ^ c) * 1099511628211ull;
-    std::mt19937_64 rng(seed ^ h);
-    if (std::uniform_real_distribution<double>(0, 1)(rng) < frac) s.val_random.push_back(m.id);
+    if (held_out_at_random(m.id, frac, seed)) s.val_random.push_back(m.id);
     else s.train.push_back(m.id);
   }
   return s;
 }
 
-Split load_or_default_split(const Dataset& ds, double frac, uint64_t seed) {
-  fs::path f = ds.root() / "split.json";
-  if (fs::exists(f)) {
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(read_file(f));
-    } catch (const nlohmann::json::exception& e) {
-      fail("{}: invalid JSON ({})", f.string(), e.what());
-    }
-    return Split::from_json(j, f.string());
+bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {
+  uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
+  for (unsigned char c : id) h = (h ^ c) * 1099511628211ull;
+  std::mt19937_64 rng(seed ^ h);
+  return std::uniform_real_distribution<double>(0, 1)(rng) < frac;
+}
+
+Split read_split(const fs::path& f) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(read_file(f));
+  } catch (const nlohmann::json::exception& e) {
+    fail("{}: invalid JSON ({})", f.string(), e.what());
   }
-  Split s = geofence_split(ds, {}, frac, seed);
+  return Split::from_json(j, f.string());
+}
+
+Split load_or_default_split(const Dataset& ds, double frac, uint64_t seed) {
+  return load_or_default_split(ds.root(), ds.ids(), frac, seed);
+}
+
+Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac, uint64_t seed) {
+  if (fs::exists(root / "split.json")) return read_split(root / "split.json");
+  if (!(frac >= 0 && frac < 1)) fail("validation fraction must be in [0, 1), got {}", frac);
+  Split s;
+  for (auto& id : ids) (held_out_at_random(id, frac, seed) ? s.val_random : s.train).push_back(id);
   if (s.val_random.empty() && s.train.size() >= 2) {  // tiny datasets: hold out the last episode
     s.val_random.push_back(s.train.back());
     s.train.pop_back();

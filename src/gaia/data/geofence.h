@@ -29,9 +29,17 @@ struct Split {
 // Episodes without a location are never geofenced; random hold-out is seeded and independent of order.
 Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
 
+// The random hold-out decision for one episode: a hash of (seed, id), so it does not change when episodes are added.
+bool held_out_at_random(const std::string& id, double frac, uint64_t seed);
+
+Split read_split(const fs::path& file);  // a split.json; errors name the file
+
 // DATASET/split.json when present (from `gaia data split`), otherwise a seeded random hold-out of `frac` of the
 // episodes (at least one when there are two or more) so that training always has a validation set.
 Split load_or_default_split(const Dataset& ds, double frac = 0.1, uint64_t seed = 0);
+// The same for any directory of episodes `ids` (e.g. a token dataset, which carries its source's split.json).
+Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac = 0.1,
+                            uint64_t seed = 0);
 std::vector<size_t> episode_indices(const Dataset& ds, const std::vector<std::string>& ids);  // ids -> Dataset indices
 
 }  // namespace gaia::data

@@ -9,6 +9,7 @@
 #include "gaia/core/npy.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/episode.h"
+#include "gaia/data/geofence.h"
 #include "gaia/tokenizer/io.h"
 
 namespace gaia::tokenizer {
@@ -43,6 +44,10 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
     fs::create_directories(out / "episodes");
     write_file_atomic(hf, header.dump(2) + "\n");
   }
+  // The source's split (geofenced validation, §3) travels with its tokens, so the world model is validated on the
+  // same held-out roads as the tokenizer. Checked, and copied on every run: a resumed run follows a re-split source.
+  if (fs::exists(dataset / "split.json"))
+    write_file_atomic(out / "split.json", data::read_split(dataset / "split.json").to_json().dump(2) + "\n");
   TokenizeResult r;
   for (size_t e = 0; e < ds.size(); ++e) {
     const std::string id = ds.ids()[e];

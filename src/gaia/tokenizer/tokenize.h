@@ -7,6 +7,7 @@
 //   TOKENS/episodes/<id>/time_s.npy     float64 [T]
 //   TOKENS/episodes/<id>/captions.jsonl T JSON strings; labels.jsonl (optional) T JSON objects
 //   TOKENS/episodes/<id>/episode.json   the source episode's metadata + "frames": the source frame indices
+//   TOKENS/split.json                   a copy of DATASET/split.json when there is one (geofenced validation)
 // Episodes are staged and renamed, so an interrupted run resumes by skipping finished episodes.
 #include <functional>
 

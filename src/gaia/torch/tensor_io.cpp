@@ -1,5 +1,7 @@
 #include "gaia/torch/tensor_io.h"
 
+#include <dlfcn.h>
+
 #include <regex>
 #include <thread>
 
@@ -23,6 +25,11 @@ torch::Device parse_device(const std::string& s) {
 void set_torch_threads(int n) {
   if (n <= 0) n = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   torch::set_num_threads(n);
+  // LibTorch sends matrix products to the system BLAS. With OpenBLAS (pthreads) it would otherwise start a thread
+  // per core on top of LibTorch's own, so it is told the same count when present (looked up, not linked: the
+  // reference BLAS has no such call).
+  using SetThreads = void (*)(int);
+  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(n);
 }
 
 torch::Dtype to_torch(DType t) {

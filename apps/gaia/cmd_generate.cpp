@@ -1,0 +1,208 @@
+// gaia generate: roll out futures with the world model (§2.3, §5.1) from a video prompt (token dataset episode or a
+// video file), or from nothing, steered by actions and text, with classifier-free guidance and schedules.
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/data/video_io.h"
+#include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/world/io.h"
+#include "gaia/world/rollout.h"
+#include "gaia/world/token_dataset.h"
+
+namespace gaia::app {
+
+namespace {
+
+struct GenerateFlags {
+  std::string world, tokenizer, tokens, episode, video, actions_csv, steer = "none", text, negative;
+  std::string sampling, token_schedule = "constant", frame_schedule = "constant";
+  int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0;
+  double speed = -1, top_p = 0.9, temperature = 1.0, guidance = 0;
+};
+
+// Steering presets (curvature in 1/m, + = left): a gentle bend (~100 m radius) and a sharp one (~30 m).
+double steer_curvature(const std::string& s) {
+  if (s == "left") return 0.01;
+  if (s == "right") return -0.01;
+  if (s == "strong-left") return 0.033;
+  if (s == "strong-right") return -0.033;
+  if (s == "straight") return 0.0;
+  fail("--steer: unknown preset '{}' (choose left, right, strong-left, strong-right, straight or none)", s);
+}
+
+}  // namespace
+
+void register_generate(CLI::App& app) {
+  auto* cmd = app.add_subcommand("generate", "roll out futures with the world model (video/action/text prompts)");
+  auto flags = std::make_shared<SharedFlags>();
+  auto g = std::make_shared<GenerateFlags>();
+  cmd->add_option("--world", g->world, "world model weights (world.safetensors)")->required();
+  cmd->add_option("--tokenizer", g->tokenizer, "tokenizer weights: decodes a preview video, tokenizes --video");
+  cmd->add_option("--tokens", g->tokens, "video prompt from this token dataset (with --episode)");
+  cmd->add_option("--episode", g->episode, "episode id or index in --tokens");
+  cmd->add_option("--start", g->start, "first prompt step in the episode");
+  cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)");
+  cmd->add_option("--prompt-frames", g->prompt_frames, "prompt frames (default: context - 1, at most 4)");
+  cmd->add_option("--frames", g->frames, "frames to generate (sliding window beyond the context)");
+  cmd->add_option("--futures", g->futures, "futures sampled in one batch");
+  cmd->add_option("--actions", g->actions_csv, "CSV with speed,curvature columns, one row per generated frame");
+  cmd->add_option("--steer", g->steer, "steering preset: left, right, strong-left, strong-right, straight");
+  cmd->add_option("--speed", g->speed, "speed for every generated frame (m/s)");
+  cmd->add_option("--text", g->text, "text prompt for every frame");
+  cmd->add_option("--negative", g->negative, "negative prompt: replaces the unconditional logits (§5.1)");
+  cmd->add_option("--sampling", g->sampling, "argmax, sample, top-k (default) or top-p");
+  cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)");
+  cmd->add_option("--top-p", g->top_p, "p for top-p");
+  cmd->add_option("--temperature", g->temperature, "softmax temperature");
+  cmd->add_option("--guidance", g->guidance, "classifier-free guidance scale s (0 = off)");
+  cmd->add_option("--guidance-tokens", g->token_schedule, "guidance over the tokens of a frame: constant or linear");
+  cmd->add_option("--guidance-frames", g->frame_schedule, "guidance over frames: constant or cosine");
+  cmd->add_option("--plateau", g->plateau, "frames at full guidance before the cosine decay");
+  add_shared_flags(cmd, flags.get(), "output directory (rollout.safetensors, preview.mp4)");
+  cmd->callback([=] {
+    Config run = resolve_config(*flags);
+    apply_threads(run);
+    if (flags->out.empty()) fail("gaia generate: --out DIR is required");
+    auto dev = parse_device(run.run.device);
+    world::WorldInfo info;
+    auto model = world::load_world(g->world, dev, &info);
+    const auto& L = model->layout;
+    const int64_t F = g->frames;
+    if (F < 1) fail("--frames must be >= 1");
+
+    // Video prompt: tokens [P, n] and the prompt's own actions.
+    world::RolloutPrompt p;
+    torch::Tensor prompt_actions;
+    int64_t P = 0;
+    const int64_t want_p = g->prompt_frames >= 0 ? g->prompt_frames : std::min<int64_t>(L.T - 1, 4);
+    tokenizer::ImageTokenizer tok{nullptr};
+    Config tok_cfg;
+    if (!g->tokenizer.empty()) tok = tokenizer::load_tokenizer(g->tokenizer, dev, &tok_cfg);
+    if (!g->tokens.empty()) {
+      world::TokenDataset ds(g->tokens, info.K);
+      if (ds.tokens_per_step() != L.n)
+        fail("{}: {} tokens per frame, the world model takes {}", g->tokens, ds.tokens_per_step(), L.n);
+      size_t e = 0;
+      if (!g->episode.empty()) {
+        auto it = std::find(ds.ids().begin(), ds.ids().end(), g->episode);
+        if (it != ds.ids().end()) e = size_t(it - ds.ids().begin());
+        else if (g->episode.find_first_not_of("0123456789") == std::string::npos && std::stoul(g->episode) < ds.size())
+          e = std::stoul(g->episode);
+        else fail("--episode: '{}' is not an episode id or index of {}", g->episode, g->tokens);
+      }
+      P = std::min<int64_t>(want_p, ds.steps(e) - g->start);
+      if (P <= 0) fail("--start {} is past the end of episode {} ({} steps)", g->start, ds.ids()[e], ds.steps(e));
+      auto ep = ds.episode(e);
+      p.tokens = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + g->start * L.n, {P, L.n}, torch::kInt)
+                     .to(torch::kLong);
+      prompt_actions = torch::from_blob(const_cast<float*>(ds.actions(e).data()) + g->start * 2, {P, 2}, torch::kFloat)
+                           .clone();
+      prompt_actions.select(1, 0).div_(world::kSpeedScale);
+      prompt_actions.select(1, 1).div_(world::kCurvatureScale);
+    } else if (!g->video.empty()) {
+      if (!tok) fail("--video needs --tokenizer to turn the frames into tokens");
+      data::VideoSource v(g->video);
+      const double fps = v.fps() > 0 ? v.fps() : 25.0;
+      const double every = fps / tok_cfg.data.world_fps;
+      std::vector<cv::Mat> frames;
+      data::VideoFrame f;
+      // Subsample to the world-model rate (§2.3): frame k of the prompt is the source frame nearest k * every.
+      for (int i = 0; v.next(&f) && int64_t(frames.size()) < want_p; ++i)
+        if (i == int(std::lround(double(frames.size()) * every)))
+          frames.push_back(data::resize_center_crop(f.bgr, tok_cfg.data.height, tok_cfg.data.width));
+      if (frames.empty()) fail("{}: no frames", g->video);
+      p.tokens = tokenizer::encode_frames(tok, frames, dev).reshape({int64_t(frames.size()), -1}).to(torch::kCPU);
+      if (p.tokens.size(1) != L.n) fail("the tokenizer gives {} tokens per frame, the world model takes {}", p.tokens.size(1), L.n);
+      P = p.tokens.size(0);
+    }
+    const int64_t steps = P + F;
+
+    // Actions: prompt steps keep theirs; generated steps from --actions / --steer / --speed, otherwise none.
+    torch::Tensor acts = torch::full({steps, 2}, std::numeric_limits<float>::quiet_NaN());
+    if (prompt_actions.defined()) acts.narrow(0, 0, P).copy_(prompt_actions);
+    bool any_action = prompt_actions.defined();
+    if (!g->actions_csv.empty()) {
+      auto rows = synth::read_actions_csv(g->actions_csv);
+      if (int64_t(rows.size()) != F)
+        fail("{}: {} action rows but --frames is {} (one row per generated frame)", g->actions_csv, rows.size(), F);
+      for (int64_t k = 0; k < F; ++k) {
+        acts[P + k][0] = rows[size_t(k)].speed / world::kSpeedScale;
+        acts[P + k][1] = rows[size_t(k)].curvature / world::kCurvatureScale;
+      }
+      any_action = true;
+    } else if (g->steer != "none" || g->speed >= 0) {
+      double last_speed = 8.0;  // m/s when neither --speed nor a prompt says
+      if (P > 0 && prompt_actions.defined() && !std::isnan(prompt_actions[P - 1][0].item<float>()))
+        last_speed = prompt_actions[P - 1][0].item<float>() * world::kSpeedScale;
+      const double v = g->speed >= 0 ? g->speed : last_speed;
+      const double c = g->steer != "none" ? steer_curvature(g->steer) : 0.0;
+      acts.narrow(0, P, F).select(1, 0).fill_(v / world::kSpeedScale);
+      acts.narrow(0, P, F).select(1, 1).fill_(c / world::kCurvatureScale);
+      any_action = true;
+    }
+    if (any_action) p.actions = acts;
+    auto text_rows = [&](const std::string& t) {
+      auto ids = info.vocab.encode(t, L.m);
+      return torch::tensor(ids, torch::kLong).view({1, L.m}).repeat({steps, 1});
+    };
+    if (!g->text.empty()) p.text_ids = text_rows(g->text);
+    if (!g->negative.empty()) p.negative_text_ids = text_rows(g->negative);
+
+    world::RolloutOptions o;
+    o.frames = int(F);
+    o.futures = g->futures;
+    o.seed = uint64_t(run.run.seed);
+    o.sampling.strategy = world::parse_strategy(g->sampling.empty() ? "top-k" : g->sampling);
+    o.sampling.top_k = g->top_k > 0 ? g->top_k : info.config.world.top_k;
+    o.sampling.top_p = g->top_p;
+    o.sampling.temperature = g->temperature;
+    o.guidance.scale = g->guidance;
+    o.guidance.tokens = world::parse_token_schedule(g->token_schedule);
+    o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
+    o.guidance.plateau = g->plateau;
+    o.guidance.total_frames = int(F);
+    if (o.guidance.active() && !p.actions.defined() && !p.text_ids.defined() && !p.negative_text_ids.defined())
+      fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
+
+    ProgressBar bar(F, "generate");
+    auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });
+    bar.finish();
+    fs::create_directories(flags->out);
+    auto grid = r.tokens.view({g->futures, steps, info.grid_h, info.grid_w}).to(torch::kInt);
+    nlohmann::json meta = {{"prompt_frames", P}, {"frames", F}, {"futures", g->futures},
+                           {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", g->guidance},
+                           {"text", g->text}, {"negative", g->negative}, {"steer", g->steer},
+                           {"seconds", r.seconds}, {"frames_per_second", double(F * g->futures) / r.seconds}};
+    save_tensors({{"tokens", grid}, {"actions", acts}}, fs::path(flags->out) / "rollout.safetensors",
+                 {{"gaia.rollout", meta.dump()}});
+    std::printf("generated %lld frames x %d futures in %.2f s (%.2f frames/s) -> %s/rollout.safetensors\n",
+                (long long)F, g->futures, r.seconds, double(F * g->futures) / r.seconds, flags->out.c_str());
+    if (tok) {
+      // Quick preview through the tokenizer's own decoder (frame by frame; the video decoder is `gaia decode`).
+      std::vector<std::vector<cv::Mat>> rows;
+      for (int f = 0; f < g->futures; ++f)
+        rows.push_back(tokenizer::decode_tokens(tok, grid[f].to(torch::kLong), dev));
+      std::vector<cv::Mat> video;
+      for (int64_t k = 0; k < steps; ++k) {
+        std::vector<cv::Mat> cols;
+        for (auto& row : rows) cols.push_back(row[size_t(k)]);
+        cv::Mat frame;
+        cv::hconcat(cols, frame);
+        if (k < P) cv::rectangle(frame, {0, 0}, {frame.cols - 1, frame.rows - 1}, {255, 255, 255}, 1);  // prompt
+        video.push_back(frame);
+      }
+      data::write_video(fs::path(flags->out) / "preview.mp4", video, info.config.data.world_fps);
+      std::printf("preview (tokenizer decoder, futures side by side, prompt frames outlined): %s/preview.mp4\n",
+                  flags->out.c_str());
+    }
+  });
+}
+
+}  // namespace gaia::app

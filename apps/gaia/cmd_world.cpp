@@ -1,0 +1,135 @@
+// gaia world train|eval: the world model of §2.3 on a token dataset (gaia tokenize, or a bare tokens .npy).
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/eval/compress.h"
+#include "gaia/eval/svg_plot.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/world/evaluate.h"
+#include "gaia/world/io.h"
+#include "gaia/world/trainer.h"
+
+namespace gaia::app {
+
+void register_world(CLI::App& app) {
+  auto* world = app.add_subcommand("world", "world model (§2.3): train, eval");
+  world->require_subcommand(1);
+
+  {
+    auto* cmd = world->add_subcommand("train", "train the world model on a token dataset (resumes from OUT/checkpoint)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto o = std::make_shared<world::WorldTrainOptions>();
+    auto tokens = std::make_shared<std::string>();
+    cmd->add_option("TOKENS", *tokens, "token dataset (gaia tokenize) or a tokens .npy [frames, h, w]")->required();
+    cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)");
+    cmd->add_option("--val-every", o->val_every, "steps between validations");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      apply_threads(c);
+      if (flags->out.empty()) fail("gaia world train: --out RUN_DIR is required");
+      world::WorldTrainOptions opt = *o;
+      opt.tokens = *tokens;
+      opt.out = flags->out;
+      std::unique_ptr<ProgressBar> bar;
+      auto r = world::train_world(
+          c, opt,
+          [&](const world::WorldStepLog& l) {
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "world");
+            std::string info = fmt::format("loss {:.3f} {:.0f} tok/s", l.loss, l.tokens_per_s);
+            if (l.validation && !l.val.empty())
+              info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
+            bar->update(l.step, info);
+          },
+          [](const std::string& n) { std::fprintf(stderr, "world: %s\n", n.c_str()); });
+      if (bar) bar->finish();
+      const int total = opt.steps > 0 ? opt.steps : c.world.steps;
+      std::printf("world: step %d%s; last validation %s\n", r.final_step,
+                  r.final_step >= total ? " (done)" : " (checkpointed)", r.last_val.dump().c_str());
+    });
+  }
+
+  {
+    auto* cmd = world->add_subcommand(
+        "eval", "validation cross-entropy and bits/token against xz and zstd, shuffled conditioning, Fig. 5 plot");
+    auto flags = std::make_shared<SharedFlags>();
+    auto tokens = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    auto max_windows = std::make_shared<size_t>(256);
+    cmd->add_option("TOKENS", *tokens, "token dataset (its validation episodes are scored)")->required();
+    cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
+    cmd->add_option("--max-windows", *max_windows, "held-out windows of T steps to score");
+    add_shared_flags(cmd, flags.get(), "output directory (eval.json, perplexity_by_position.svg)");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      auto dev = parse_device(run.run.device);
+      world::WorldInfo info;
+      auto model = world::load_world(*weights, dev, &info);
+      world::TokenDataset ds(*tokens, info.K);
+      if (ds.tokens_per_step() != info.n())
+        fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
+      auto split = ds.split(0.1, info.config.run.seed);
+      auto ids = split.val_geofence;
+      ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+      if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
+      auto eps = ds.indices(ids);
+      auto windows = world::validation_windows(ds, eps, info.config.world.context_steps, *max_windows);
+      if (windows.empty()) fail("{}: no held-out window of {} steps to score", *tokens, info.config.world.context_steps);
+      const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
+      nlohmann::json j = {{"tokens", *tokens}, {"world", *weights}, {"windows", windows.size()}};
+      ProgressBar bar(5, "world eval");
+      int done = 0;
+      auto run_score = [&](world::Conditioning mode, bool shuffle) {
+        world::ScoreOptions so;
+        so.mode = mode;
+        so.shuffle = shuffle;
+        so.batch = info.config.world.batch_size;
+        auto s = world::score(model, ds, windows, vocab, so);
+        bar.update(++done);
+        return s;
+      };
+      auto act = run_score(world::Conditioning::kAction, false);
+      auto act_shuf = run_score(world::Conditioning::kAction, true);
+      auto txt = run_score(world::Conditioning::kText, false);
+      auto txt_shuf = run_score(world::Conditioning::kText, true);
+      auto unc = run_score(world::Conditioning::kUnconditional, false);
+      bar.finish();
+      // The same held-out token stream (the scored windows, in order) through general-purpose compressors.
+      std::vector<int16_t> stream;
+      for (auto& w : windows) {
+        auto ep = ds.episode(w.episode);
+        const int64_t n = ds.tokens_per_step();
+        for (int64_t t = w.start; t < w.start + w.steps; ++t)
+          for (int64_t i = 0; i < n; ++i) stream.push_back(static_cast<int16_t>(ep->tokens[size_t(t * n + i)]));
+      }
+      auto xz = eval::xz_size(stream), zs = eval::zstd_size(stream);
+      const double floor = std::min(xz.bits_per_token, zs.bits_per_token);
+      j["cross_entropy_nats"] = {{"action", act.nats}, {"text", txt.nats}, {"uncond", unc.nats},
+                                 {"action_shuffled", act_shuf.nats}, {"text_shuffled", txt_shuf.nats}};
+      j["bits_per_token"] = {{"world_model", act.bits()}, {"xz", xz.bits_per_token}, {"zstd", zs.bits_per_token},
+                             {"ratio_best_compressor_over_model", floor / act.bits()}};
+      j["conditioning_used"] = {{"action_shuffled_minus_true_nats", act_shuf.nats - act.nats},
+                                {"text_shuffled_minus_true_nats", txt_shuf.nats - txt.nats}};
+      std::vector<double> ppl;
+      for (double v : act.by_position) ppl.push_back(std::exp(v));
+      j["perplexity_by_position"] = ppl;
+      std::printf("%s\n", j.dump(2).c_str());
+      if (!flags->out.empty()) {
+        fs::create_directories(flags->out);
+        write_file_atomic(fs::path(flags->out) / "eval.json", j.dump(2) + "\n");
+        std::vector<double> xs;
+        for (size_t i = 0; i < ppl.size(); ++i) xs.push_back(double(i));
+        auto svg = eval::svg_lines("Perplexity by token position within a frame (Fig. 5)", xs,
+                                   {{"real tokens (action-conditioned)", ppl, ""}}, "token position", "perplexity");
+        write_file_atomic(fs::path(flags->out) / "perplexity_by_position.svg", svg);
+      }
+    });
+  }
+}
+
+}  // namespace gaia::app

@@ -1,0 +1,69 @@
+#include "gaia/world/evaluate.h"
+
+#include <cmath>
+
+namespace gaia::world {
+
+double Score::bits() const { return nats / std::log(2.0); }
+
+namespace {
+
+ConditioningMix only(Conditioning c) {
+  switch (c) {
+    case Conditioning::kUnconditional: return {1, 0, 0};
+    case Conditioning::kAction: return {0, 1, 0};
+    case Conditioning::kText: return {0, 0, 1};
+  }
+  return {};
+}
+
+}  // namespace
+
+Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
+            const ScoreOptions& o) {
+  torch::NoGradGuard ng;
+  model->eval();
+  const auto dev = model->token_embedding->weight.device();
+  const int64_t n = model->layout.n;
+  Score s;
+  s.by_position.assign(static_cast<size_t>(n), 0.0);
+  auto sum_pos = torch::zeros({n}, torch::kDouble);
+  const auto mix = only(o.mode);
+  const size_t W = windows.size();
+  for (size_t b0 = 0; b0 < W; b0 += static_cast<size_t>(o.batch)) {
+    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(W, b0 + size_t(o.batch))));
+    std::mt19937_64 rng(b0);
+    WorldBatch batch = ds.make_batch(ws, vocab, model->layout.m, mix, rng);
+    if (o.shuffle && W > 1) {
+      // Conditioning from the window half the set away: a fixed derangement that pairs unrelated episodes.
+      std::vector<Window> other;
+      for (size_t i = b0; i < b0 + ws.size(); ++i) other.push_back(windows[(i + W / 2) % W]);
+      std::mt19937_64 rng2(b0);
+      WorldBatch c = ds.make_batch(other, vocab, model->layout.m, mix, rng2);
+      batch.actions = c.actions;
+      batch.text_ids = c.text_ids;
+      batch.text_emb = c.text_emb;
+    }
+    auto logits = model->forward(batch.to(dev));                             // [B, T, n, K]
+    auto tok = batch.tokens.to(dev);
+    auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);  // [B,T,n]
+    sum_pos += nll.sum(std::vector<int64_t>{0, 1}).to(torch::kCPU, torch::kDouble);
+    s.tokens += nll.numel();
+  }
+  if (s.tokens == 0) return s;
+  const double per_pos = double(s.tokens) / double(n);
+  for (int64_t i = 0; i < n; ++i) s.by_position[size_t(i)] = sum_pos[i].item<double>() / per_pos;
+  s.nats = sum_pos.sum().item<double>() / double(s.tokens);
+  return s;
+}
+
+std::vector<Window> validation_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
+                                       size_t max_windows) {
+  auto all = ds.windows(episodes, T, T);  // non-overlapping
+  if (all.size() <= max_windows) return all;
+  std::vector<Window> out;
+  for (size_t i = 0; i < max_windows; ++i) out.push_back(all[i * all.size() / max_windows]);
+  return out;
+}
+
+}  // namespace gaia::world

@@ -1,0 +1,20 @@
+#pragma once
+// Shipping a world model: weights in safetensors with everything needed to use them in the metadata: the config
+// (YAML), the token grid (h, w), the codebook size K and the built-in text encoder's vocabulary.
+#include "gaia/text/vocab.h"
+#include "gaia/world/model.h"
+
+namespace gaia::world {
+
+struct WorldInfo {
+  Config config;
+  int64_t grid_h = 0, grid_w = 0, K = 0;
+  text::Vocab vocab;
+  int64_t n() const { return grid_h * grid_w; }
+};
+
+void save_world(WorldModel& m, const WorldInfo& info, const fs::path& path);
+// Builds the model from the file's metadata and loads the weights (on `device`, eval mode). Errors name the file.
+WorldModel load_world(const fs::path& path, const torch::Device& device, WorldInfo* info_out = nullptr);
+
+}  // namespace gaia::world

@@ -1,0 +1,327 @@
+#include "gaia/world/token_dataset.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/core/error.h"
+#include "gaia/core/npy.h"
+#include "gaia/train/checkpoint.h"
+
+namespace gaia::world {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+json read_json(const fs::path& p) {
+  std::string text = read_file(p);
+  try {
+    return json::parse(text);
+  } catch (const std::exception& e) {
+    fail("{}: invalid JSON ({})", p.string(), e.what());
+  }
+}
+
+std::vector<std::string> read_jsonl_strings(const fs::path& p) {
+  std::string text = read_file(p);
+  std::vector<std::string> out;
+  for (size_t start = 0; start < text.size();) {
+    size_t nl = text.find('\n', start);
+    if (nl == std::string::npos) nl = text.size();
+    try {
+      out.push_back(json::parse(text.substr(start, nl - start)).get<std::string>());
+    } catch (const std::exception&) {
+      fail("{}: line {} is not a JSON string", p.string(), out.size() + 1);
+    }
+    start = nl + 1;
+  }
+  return out;
+}
+
+// Token ids of an integer .npy as int32 (int16 from gaia tokenize; int32 / int64 from other tokenizers).
+std::vector<int32_t> token_ids(const NpyArray& a, const fs::path& file) {
+  if (a.dtype != DType::I16 && a.dtype != DType::I32 && a.dtype != DType::I64 && a.dtype != DType::U8)
+    fail("{}: token array has dtype {}; want int16, int32 or int64", file.string(), safetensors_name(a.dtype));
+  std::vector<int32_t> out;
+  out.reserve(static_cast<size_t>(a.size()));
+  for (int64_t v : a.to_int64()) {
+    // Anything beyond int32 is out of every codebook; keep it negative so the range check reports it.
+    out.push_back(v >= 0 && v <= std::numeric_limits<int32_t>::max() ? static_cast<int32_t>(v) : -1);
+  }
+  return out;
+}
+
+}  // namespace
+
+Conditioning ConditioningMix::draw(std::mt19937_64& rng) const {
+  const double total = p_uncond + p_action + p_text;
+  if (!(p_uncond >= 0 && p_action >= 0 && p_text >= 0 && total > 0))
+    fail("world.p_uncond / p_action / p_text must be >= 0 with a positive sum, got {} / {} / {}", p_uncond, p_action, p_text);
+  double u = std::uniform_real_distribution<double>(0, total)(rng);
+  if (u < p_uncond) return Conditioning::kUnconditional;
+  if (u < p_uncond + p_action) return Conditioning::kAction;
+  return Conditioning::kText;
+}
+
+TokenDataset::TokenDataset(const fs::path& path, int64_t codebook_size, size_t cache_episodes)
+    : path_(path), cache_capacity_(std::max<size_t>(cache_episodes, 1)) {
+  if (!fs::exists(path)) fail("{}: no such token dataset (a directory from gaia tokenize, or a tokens .npy)", path.string());
+  if (fs::is_regular_file(path)) {
+    // A bare [frames, h, w] array from another tokenizer: one episode, no actions, no text, no metadata.
+    NpyArray a = npy_read(path);
+    if (a.shape.size() != 3 || a.shape[0] < 1 || a.shape[1] < 1 || a.shape[2] < 1)
+      fail("{}: a token array must be [frames, h, w], got {}", path.string(), shape_str(a.shape));
+    auto ep = std::make_shared<TokenEpisode>();
+    ep->tokens = token_ids(a, path);
+    h_ = a.shape[1];
+    w_ = a.shape[2];
+    int32_t lo = *std::min_element(ep->tokens.begin(), ep->tokens.end());
+    int32_t hi = *std::max_element(ep->tokens.begin(), ep->tokens.end());
+    if (lo < 0) fail("{}: negative token id (or one beyond int32) in the array", path.string());
+    K_ = codebook_size > 0 ? codebook_size : int64_t(hi) + 1;
+    check_tokens(ep->tokens, path);
+    Info info;
+    info.meta.id = path.stem().string();
+    info.steps = a.shape[0];
+    info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);
+    ids_.push_back(info.meta.id);
+    info_.push_back(std::move(info));
+    bare_ = std::move(ep);
+    return;
+  }
+  fs::path hf = path / "dataset.json";
+  if (!fs::exists(hf)) fail("{}: not a gaia token dataset (no dataset.json; make one with gaia tokenize)", path.string());
+  json header = read_json(hf);
+  try {
+    if (header.at("format").get<std::string>() != "gaia-tokens")
+      fail("{}: format is '{}', not gaia-tokens", hf.string(), header.at("format").get<std::string>());
+    if (header.at("schema_version").get<int>() != 1)
+      fail("{}: schema_version {} is not supported (this gaia reads 1)", hf.string(), header.at("schema_version").get<int>());
+    auto grid = header.at("grid").get<std::vector<int64_t>>();
+    if (grid.size() != 2 || grid[0] < 1 || grid[1] < 1) fail("{}: grid must be [h, w] with h, w >= 1", hf.string());
+    h_ = grid[0];
+    w_ = grid[1];
+    K_ = header.at("codebook_size").get<int64_t>();
+    rate_hz_ = header.value("rate_hz", 0.0);
+  } catch (const json::exception& e) {
+    fail("{}: bad token dataset header ({})", hf.string(), e.what());
+  }
+  if (K_ < 1) fail("{}: codebook_size must be >= 1, got {}", hf.string(), K_);
+  if (codebook_size > 0 && codebook_size != K_)
+    fail("{}: codebook_size is {}, but {} was expected (tokens from a different tokenizer?)", hf.string(), K_, codebook_size);
+
+  // Same rule as data::Dataset: a directory with episode.json is a finished episode; staging dirs are skipped.
+  if (fs::exists(path / "episodes"))
+    for (auto& d : fs::directory_iterator(path / "episodes")) {
+      std::string name = d.path().filename().string();
+      if (d.is_directory() && name.rfind(".tmp-", 0) != 0 && fs::exists(d.path() / "episode.json")) ids_.push_back(name);
+    }
+  std::sort(ids_.begin(), ids_.end());
+  for (size_t e = 0; e < ids_.size(); ++e) {
+    fs::path dir = episode_dir(e), mf = dir / "episode.json";
+    json j = read_json(mf);
+    Info info;
+    info.meta = data::EpisodeMeta::from_json(j, mf.string());
+    try {
+      info.steps = j.at("steps").get<int64_t>();
+    } catch (const json::exception& ex) {
+      fail("{}: no step count ({})", mf.string(), ex.what());
+    }
+    if (info.steps < 1) fail("{}: steps must be >= 1, got {}", mf.string(), info.steps);
+    fs::path af = dir / "actions.npy";
+    if (fs::exists(af)) {
+      NpyArray a = npy_read(af);
+      if (a.shape != std::vector<int64_t>{info.steps, 2})
+        fail("{}: shape {}, want [{}, 2] (steps from episode.json, speed and curvature)", af.string(),
+             shape_str(a.shape), info.steps);
+      std::vector<double> v = a.to_double();
+      info.actions.assign(v.begin(), v.end());
+    } else {
+      info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);  // no signals: every action is missing
+    }
+    has_captions_ = has_captions_ || fs::exists(dir / "captions.jsonl");
+    info_.push_back(std::move(info));
+  }
+}
+
+fs::path TokenDataset::episode_dir(size_t e) const {
+  if (bare()) return path_;
+  return path_ / "episodes" / ids_.at(e);
+}
+
+void TokenDataset::check_tokens(const std::vector<int32_t>& t, const fs::path& file) const {
+  for (size_t i = 0; i < t.size(); ++i)
+    if (t[i] < 0 || t[i] >= K_) {
+      const int64_t n = h_ * w_, s = static_cast<int64_t>(i) / n;
+      fail("{}: token {} at step {}, position {} is outside [0, {}) (codebook_size K = {})", file.string(), t[i], s,
+           static_cast<int64_t>(i) - s * n, K_, K_);
+    }
+}
+
+std::shared_ptr<const TokenEpisode> TokenDataset::load(size_t e) const {
+  fs::path dir = episode_dir(e), tf = dir / "tokens.npy";
+  const int64_t T = steps(e);
+  NpyArray a = npy_read(tf);
+  if (a.shape != std::vector<int64_t>{T, h_, w_})
+    fail("{}: shape {}, want [{}, {}, {}] (steps from episode.json, grid from dataset.json)", tf.string(),
+         shape_str(a.shape), T, h_, w_);
+  auto ep = std::make_shared<TokenEpisode>();
+  ep->tokens = token_ids(a, tf);
+  check_tokens(ep->tokens, tf);
+  fs::path cf = dir / "captions.jsonl";
+  if (fs::exists(cf)) {
+    ep->captions = read_jsonl_strings(cf);
+    if (static_cast<int64_t>(ep->captions.size()) != T)
+      fail("{}: has {} captions, episode.json says {} steps", cf.string(), ep->captions.size(), T);
+  }
+  return ep;
+}
+
+std::shared_ptr<const TokenEpisode> TokenDataset::episode(size_t e) const {
+  if (e >= size()) fail("{}: episode {} out of range [0, {})", path_.string(), e, size());
+  if (bare_) return bare_;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto it = cache_.begin(); it != cache_.end(); ++it)
+      if (it->first == e) {
+        cache_.splice(cache_.begin(), cache_, it);
+        return cache_.front().second;
+      }
+  }
+  auto ep = load(e);  // outside the lock: reading a file should not stall other threads' cache hits
+  std::lock_guard<std::mutex> lock(mu_);
+  for (auto& [k, v] : cache_)
+    if (k == e) return v;  // another thread loaded it meanwhile: keep one copy
+  cache_.emplace_front(e, ep);
+  while (cache_.size() > cache_capacity_) cache_.pop_back();
+  return ep;
+}
+
+void TokenDataset::check_all() const {
+  if (bare_) return;  // checked at open
+  for (size_t e = 0; e < size(); ++e) load(e);
+}
+
+data::Split TokenDataset::split(double val_fraction, uint64_t seed) const {
+  if (bare()) return data::Split{ids_, {}, {}};
+  return data::load_or_default_split(path_, ids_, val_fraction, seed);
+}
+
+std::vector<size_t> TokenDataset::indices(const std::vector<std::string>& ids) const {
+  std::vector<size_t> out;
+  for (auto& id : ids) {
+    auto it = std::lower_bound(ids_.begin(), ids_.end(), id);  // ids_ is sorted
+    if (it == ids_.end() || *it != id)
+      fail("{}: split names episode '{}' which is not in the token dataset (an interrupted gaia tokenize? run it "
+           "again to finish)", (path_ / "split.json").string(), id);
+    out.push_back(static_cast<size_t>(it - ids_.begin()));
+  }
+  return out;
+}
+
+std::vector<Window> TokenDataset::windows(const std::vector<size_t>& episodes, int64_t T, int64_t stride) const {
+  if (T < 1) fail("window length must be >= 1 step, got {}", T);
+  if (stride < 1) fail("window stride must be >= 1 step, got {}", stride);
+  std::vector<Window> out;
+  for (size_t e : episodes)
+    for (int64_t s = 0; s + T <= steps(e); s += stride) out.push_back(Window{e, s, T});
+  return out;
+}
+
+data::FeatureRow TokenDataset::features(const Window& w) const {
+  const auto& a = actions(w.episode);
+  std::vector<float> v, k;
+  for (int64_t t = w.start; t < w.start + w.steps; ++t) {
+    v.push_back(a[static_cast<size_t>(2 * t)]);
+    k.push_back(a[static_cast<size_t>(2 * t + 1)]);
+  }
+  return data::example_features(meta(w.episode), v, k);
+}
+
+WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const text::Vocab* vocab, int64_t m,
+                                    const ConditioningMix& mix, std::mt19937_64& rng) const {
+  if (windows.empty()) fail("{}: a batch needs at least one window", path_.string());
+  const int64_t B = static_cast<int64_t>(windows.size()), T = windows[0].steps, n = tokens_per_step();
+  const bool text = vocab && has_captions_;
+  if (text && m < 1) fail("text tokens per step (world.text_tokens) must be >= 1, got {}", m);
+  auto tokens = torch::empty({B, T, n}, torch::kInt64);
+  auto act = torch::empty({B, T, 2}, torch::kFloat32);
+  auto text_ids = text ? torch::zeros({B, T, m}, torch::kInt64) : torch::Tensor();
+  auto use_action = torch::empty({B}, torch::kBool), use_text = torch::empty({B}, torch::kBool);
+  int64_t* tp = tokens.data_ptr<int64_t>();
+  float* ap = act.data_ptr<float>();
+  auto ua = use_action.accessor<bool, 1>(), ut = use_text.accessor<bool, 1>();
+  for (int64_t b = 0; b < B; ++b) {
+    const Window& w = windows[static_cast<size_t>(b)];
+    if (w.steps != T) fail("{}: windows of one batch must have the same length ({} and {})", path_.string(), T, w.steps);
+    if (w.episode >= size() || w.start < 0 || w.start + w.steps > steps(w.episode))
+      fail("{}: window [{}, {}) is outside episode {} ({} steps)", path_.string(), w.start, w.start + w.steps,
+           w.episode, w.episode < size() ? steps(w.episode) : 0);
+    auto ep = episode(w.episode);
+    std::copy_n(ep->tokens.begin() + w.start * n, T * n, tp + b * T * n);
+    const auto& a = actions(w.episode);
+    for (int64_t t = 0; t < T; ++t) {
+      // NaN stays NaN (NaN / scale): the model swaps missing actions for its null action token.
+      ap[(b * T + t) * 2 + 0] = static_cast<float>(a[static_cast<size_t>(2 * (w.start + t))] / kSpeedScale);
+      ap[(b * T + t) * 2 + 1] = static_cast<float>(a[static_cast<size_t>(2 * (w.start + t) + 1)] / kCurvatureScale);
+    }
+    if (text && !ep->captions.empty())
+      for (int64_t t = 0; t < T; ++t) {
+        auto ids = vocab->encode(ep->captions[static_cast<size_t>(w.start + t)], m);
+        std::copy(ids.begin(), ids.end(), text_ids.data_ptr<int64_t>() + (b * T + t) * m);
+      }
+    Conditioning c = mix.draw(rng);
+    ua[b] = c == Conditioning::kAction;
+    ut[b] = c == Conditioning::kText;
+  }
+  WorldBatch out;
+  out.tokens = tokens;
+  out.actions = act;
+  out.text_ids = text_ids;
+  out.use_action = use_action;
+  out.use_text = use_text;
+  return out;
+}
+
+WindowSampler::WindowSampler(const TokenDataset& ds, std::vector<Window> windows, std::vector<std::string> features,
+                             double exponent, int bins)
+    : windows_(std::move(windows)), balancer_(std::move(features), exponent, bins) {
+  if (windows_.empty())
+    fail("{}: no windows to sample (are all episodes shorter than the context of T steps?)", ds.path().string());
+  rows_.reserve(windows_.size());
+  for (auto& w : windows_) rows_.push_back(ds.features(w));
+  balancer_.fit(rows_);
+}
+
+std::vector<Window> WindowSampler::sample(int64_t count, std::mt19937_64& rng) const {
+  std::uniform_int_distribution<size_t> pick(0, windows_.size() - 1);
+  std::vector<Window> out;
+  out.reserve(static_cast<size_t>(std::max<int64_t>(count, 0)));
+  while (static_cast<int64_t>(out.size()) < count) {
+    size_t i = pick(rng);
+    // Rejection (paper §3): the window with the highest weight is always kept, so this terminates.
+    if (!balanced() || balancer_.keep(rows_[i], rng)) out.push_back(windows_[i]);
+  }
+  return out;
+}
+
+text::Vocab build_vocab(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t max_size) {
+  std::map<std::string, int64_t> counts;
+  for (size_t e : episodes)
+    for (auto& c : ds.episode(e)->captions) text::Vocab::count(c, counts);
+  return text::Vocab::from_counts(counts, max_size);
+}
+
+WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, const text::Vocab* vocab,
+                          const WorldConfig& cfg, uint64_t seed, int step) {
+  std::mt19937_64 rng(train::step_seed(seed, step, kBatchStream));
+  auto windows = sampler.sample(cfg.batch_size, rng);
+  return ds.make_batch(windows, vocab, cfg.text_tokens, ConditioningMix::from(cfg), rng);
+}
+
+}  // namespace gaia::world

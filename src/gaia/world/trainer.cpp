@@ -1,0 +1,130 @@
+#include "gaia/world/trainer.h"
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+
+#include "gaia/core/error.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/train/checkpoint.h"
+#include "gaia/train/optim.h"
+#include "gaia/train/schedule.h"
+#include "gaia/world/evaluate.h"
+#include "gaia/world/io.h"
+
+namespace gaia::world {
+
+WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
+                             const std::function<void(const WorldStepLog&)>& on_step,
+                             const std::function<void(const std::string&)>& on_note) {
+  const auto& wc = cfg.world;
+  const torch::Device dev = parse_device(cfg.run.device);
+  WorldTrainResult result;
+  auto note = [&](const std::string& s) {
+    result.notes.push_back(s);
+    if (on_note) on_note(s);
+  };
+
+  TokenDataset ds(opt.tokens, 0);
+  const int64_t T = wc.context_steps;
+  auto split = ds.split(0.1, cfg.run.seed);
+  auto train_eps = ds.indices(split.train);
+  auto val_ids = split.val_geofence;
+  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  auto val_eps = ds.indices(val_ids);
+  auto train_windows = ds.windows(train_eps, T, 1);
+  if (train_windows.empty())
+    fail("{}: no training window of {} steps (world.context_steps); episodes are too short", opt.tokens.string(), T);
+  WindowSampler sampler(ds, train_windows, ds.bare() ? std::vector<std::string>{} : cfg.data.balance_world,
+                        cfg.data.balance_exponent, cfg.data.balance_bins);
+  text::Vocab vocab;
+  if (ds.has_captions()) vocab = build_vocab(ds, train_eps, wc.text_vocab);
+  else note("no captions in the token dataset: text conditioning uses the null text only");
+  auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
+  if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
+
+  torch::manual_seed(cfg.run.seed);
+  WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
+  model->to(dev);
+  auto optim = train::make_adamw(model->parameters(), wc.lr, wc.weight_decay, wc.beta1, wc.beta2);
+  const int total = opt.steps > 0 ? opt.steps : wc.steps;
+  train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
+  WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
+
+  fs::path ckpt = opt.out / "checkpoint";
+  int step = 0;
+  if (train::has_checkpoint(ckpt)) {
+    auto st = train::load_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}});
+    step = st.step;
+    result.resumed = true;
+    note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+  }
+  fs::create_directories(opt.out);
+  std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
+  auto save = [&]() {
+    train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}},
+                           {step, {{"config", cfg.name}}});
+  };
+  auto validate = [&]() {
+    nlohmann::json v;
+    if (val_windows.empty()) return v;
+    for (auto [name, mode] : {std::pair{"action", Conditioning::kAction}, std::pair{"text", Conditioning::kText},
+                              std::pair{"uncond", Conditioning::kUnconditional}}) {
+      ScoreOptions so;
+      so.mode = mode;
+      so.batch = wc.batch_size;
+      auto s = score(model, ds, val_windows, ds.has_captions() ? &vocab : nullptr, so);
+      v[name] = s.nats;
+    }
+    v["bits_per_token"] = v["action"].get<double>() / std::log(2.0);
+    model->train();
+    return v;
+  };
+
+  const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
+  model->train();
+  int steps_this_run = 0;
+  while (step < total) {
+    auto t0 = std::chrono::steady_clock::now();
+    auto batch = training_batch(ds, sampler, ds.has_captions() ? &vocab : nullptr, wc, cfg.run.seed, step).to(dev);
+    torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
+    const double lr = sched(step);
+    train::set_lr(*optim, lr);
+    auto loss = image_token_loss(model->forward(batch), batch.tokens);
+    const double lv = loss.item<double>();
+    if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
+    optim->zero_grad();
+    loss.backward();
+    const double gn = train::clip_grad_norm(model->parameters(), wc.grad_clip);
+    optim->step();
+    ++step;
+    ++steps_this_run;
+    WorldStepLog log;
+    log.step = step;
+    log.total = total;
+    log.lr = lr;
+    log.loss = lv;
+    log.grad_norm = gn;
+    log.tokens_per_s = double(tokens_per_batch) /
+                       std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    if (step % opt.val_every == 0 || step == total) {
+      log.validation = true;
+      log.val = validate();
+      result.last_val = log.val;
+    }
+    metrics << nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
+                               {"tokens_per_s", log.tokens_per_s}, {"val", log.val}})
+                   .dump()
+            << "\n";
+    metrics.flush();
+    if (on_step) on_step(log);
+    const bool stop = opt.stop_after > 0 && steps_this_run >= opt.stop_after;
+    if (step % cfg.run.checkpoint_every == 0 || step == total || stop) save();
+    if (stop) break;
+  }
+  result.final_step = step;
+  if (step >= total) save_world(model, info, opt.out / "world.safetensors");
+  return result;
+}
+
+}  // namespace gaia::world

@@ -1,0 +1,42 @@
+#pragma once
+// `gaia world train` (§2.3, §4.2): windows of T steps from a token dataset, balanced (§3), each example
+// unconditional / action- / text-conditioned (20/40/40), cross-entropy on image tokens, AdamW (lr 1e-4, wd 0.1,
+// betas 0.9/0.95), gradient clipping 1.0, warm-up then cosine decay to lr/10, validation on the geofenced
+// held-out episodes, checkpoints that resume exactly, metrics to OUT/metrics.jsonl.
+#include <functional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/core/config.h"
+#include "gaia/core/fs.h"
+
+namespace gaia::world {
+
+struct WorldTrainOptions {
+  fs::path tokens, out;       // OUT/checkpoint/ (resumable), OUT/world.safetensors, OUT/metrics.jsonl
+  int steps = -1;             // -1: config world.steps
+  int val_every = 250;
+  size_t val_windows = 64;    // held-out windows scored at each validation
+  int stop_after = -1;        // stop (with a checkpoint) after this many steps of this run
+};
+
+struct WorldStepLog {
+  int step = 0, total = 0;
+  double lr = 0, loss = 0, grad_norm = 0, tokens_per_s = 0;
+  bool validation = false;
+  nlohmann::json val;         // {"action": nats, "text": nats, "uncond": nats, "bits_action": ...}
+};
+
+struct WorldTrainResult {
+  int final_step = 0;
+  bool resumed = false;
+  nlohmann::json last_val;
+  std::vector<std::string> notes;
+};
+
+WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
+                             const std::function<void(const WorldStepLog&)>& on_step = {},
+                             const std::function<void(const std::string&)>& on_note = {});
+
+}  // namespace gaia::world
