@@ -252,3 +252,28 @@ TEST(WorldRollout, BadPromptsAreClearErrors) {
   p.actions = torch::zeros({2, 2});  // needs 1 + 2 rows
   EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("actions has 2 rows"), std::string::npos);
 }
+
+TEST(WorldModel, ActivationCheckpointingGivesTheSameGradients) {
+  Config c = tiny();
+  auto grads = [&](bool ckpt) {
+    Config cc = c;
+    cc.world.activation_checkpointing = ckpt;
+    auto m = small_model(cc, 11);
+    m->train();
+    auto b = random_batch(cc, 2, 3);
+    auto loss = image_token_loss(m->forward(b), b.tokens);
+    loss.backward();
+    std::vector<torch::Tensor> g;  // blocks.0.attn.qkv.weight first: a parameter only the checkpointed path reaches
+    g.push_back(m->named_parameters()["blocks.0.attn.qkv.weight"].grad().clone());
+    for (auto& p : m->parameters()) g.push_back(p.grad().defined() ? p.grad().clone() : torch::zeros_like(p));
+    return std::make_pair(loss.item<double>(), g);
+  };
+  auto [l0, g0] = grads(false);
+  auto [l1, g1] = grads(true);
+  EXPECT_NEAR(l0, l1, 1e-6);
+  ASSERT_EQ(g0.size(), g1.size());
+  double worst = 0;
+  for (size_t i = 0; i < g0.size(); ++i) worst = std::max(worst, (g0[i] - g1[i]).abs().max().item<double>());
+  EXPECT_LT(worst, 1e-5);
+  EXPECT_GT(g1[0].abs().sum().item<double>(), 0);
+}

@@ -99,7 +99,12 @@ torch::Tensor WorldModelImpl::embed(const WorldBatch& b, int64_t t0) {
 torch::Tensor WorldModelImpl::body(const torch::Tensor& x, KVCache* cache) {
   auto h = x;
   int i = 0;
-  for (auto& blk : *blocks) h = blk->as<Block>()->forward(h, cache, i++);
+  for (auto& m : *blocks) {
+    Block blk(std::dynamic_pointer_cast<BlockImpl>(m));
+    // Checkpointing only pays (and only applies) when training: no cache, gradients on.
+    h = cfg.activation_checkpointing && !cache && is_training() ? checkpointed(blk, h) : blk->forward(h, cache, i);
+    ++i;
+  }
   if (cache) cache->length += x.size(1);
   return ln_f->forward(h);
 }

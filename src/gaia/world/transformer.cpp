@@ -65,4 +65,35 @@ torch::Tensor BlockImpl::forward(const torch::Tensor& x, KVCache* cache, int lay
   return h + fc_proj->forward(F::gelu(fc->forward(ln2->forward(h))));
 }
 
+namespace {
+
+// The block is not an input of the autograd node, so its parameter gradients are accumulated by the nested backward
+// in backward(); only the gradient of x is returned (the "reentrant" checkpoint of PyTorch).
+struct CheckpointFn : torch::autograd::Function<CheckpointFn> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, torch::Tensor x, BlockImpl* block) {
+    ctx->saved_data["block"] = reinterpret_cast<int64_t>(block);
+    ctx->save_for_backward({x});
+    torch::NoGradGuard ng;
+    return block->forward(x);
+  }
+  static torch::autograd::tensor_list backward(torch::autograd::AutogradContext* ctx,
+                                               torch::autograd::tensor_list grad) {
+    auto* block = reinterpret_cast<BlockImpl*>(ctx->saved_data["block"].toInt());
+    auto x = ctx->get_saved_variables()[0].detach().requires_grad_(true);
+    {
+      torch::AutoGradMode on(true);
+      auto y = block->forward(x);
+      y.backward(grad[0]);
+    }
+    return {x.grad(), torch::Tensor()};
+  }
+};
+
+}  // namespace
+
+torch::Tensor checkpointed(Block& block, const torch::Tensor& x) {
+  if (!torch::GradMode::is_enabled() || !x.requires_grad()) return block->forward(x);
+  return CheckpointFn::apply(x, block.get());
+}
+
 }  // namespace gaia::world

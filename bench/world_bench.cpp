@@ -1,0 +1,96 @@
+// World model throughput (docs/benchmarks.md): one training step of the default config, and generating one frame
+// (n tokens) with the KV cache against the naive loop that recomputes the whole context for every token.
+#include <benchmark/benchmark.h>
+#include <torch/torch.h>
+
+#include "gaia/core/config.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/train/optim.h"
+#include "gaia/world/model.h"
+#include "gaia/world/rollout.h"
+
+using namespace gaia;
+using namespace gaia::world;
+
+namespace {
+
+Config bench_config() {
+  Config c;  // default config: d 256, 6 layers, T 8, m 16, n 144, K 1024
+  if (const char* t = std::getenv("GAIA_BENCH_THREADS")) set_torch_threads(std::atoi(t));
+  return c;
+}
+
+WorldBatch random_batch(const Config& c, int64_t B, int64_t T) {
+  WorldBatch b;
+  b.tokens = torch::randint(0, c.tokenizer.codebook_size, {B, T, c.image_tokens()}, torch::kLong);
+  b.actions = torch::randn({B, T, 2});
+  b.text_ids = torch::randint(0, c.world.text_vocab, {B, T, c.world.text_tokens}, torch::kLong);
+  return b;
+}
+
+}  // namespace
+
+static void BM_WorldTrainStep(benchmark::State& st) {
+  Config c = bench_config();
+  const int64_t B = st.range(0);
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  m->train();
+  auto opt = train::make_adamw(m->parameters(), 1e-4, 0.1, 0.9, 0.95);
+  auto b = random_batch(c, B, c.world.context_steps);
+  for (auto _ : st) {
+    opt->zero_grad();
+    auto loss = image_token_loss(m->forward(b), b.tokens);
+    loss.backward();
+    opt->step();
+  }
+  st.counters["tokens/s"] = benchmark::Counter(double(B * m->layout.length()) * st.iterations(), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_WorldTrainStep)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Frames generated per second after a prompt of T - 1 frames (the context is full for the generated frame).
+static void BM_RolloutCached(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  RolloutPrompt p;
+  const int64_t P = c.world.context_steps - 1, F = st.range(0);
+  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
+  st.counters["frames/s"] = benchmark::Counter(double(F) * st.iterations(), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The naive baseline: every new token runs the whole sequence so far through the transformer again.
+static void BM_RolloutRecompute(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  m->eval();
+  torch::NoGradGuard ng;
+  const int64_t P = c.world.context_steps - 1, n = c.image_tokens(), d = c.world.d_model;
+  auto prompt = random_batch(c, 1, P);
+  prompt.actions.reset();
+  prompt.text_ids.reset();
+  SamplingOptions so;
+  auto gen = at::detail::createCPUGenerator(0);
+  for (auto _ : st) {
+    WorldBatch step;
+    step.tokens = torch::zeros({1, 1, n}, torch::kLong);
+    auto ctx = m->embed(prompt);                                        // [1, P * S, d]
+    auto text = m->embed_text(step, P).view({1, m->layout.m, d});
+    std::vector<torch::Tensor> parts{ctx, text};
+    for (int64_t i = 0; i < n; ++i) {
+      auto h = m->body(torch::cat(parts, 1));                           // full recompute
+      auto tok = sample_tokens(m->logits(h.select(1, h.size(1) - 1)), so, gen);
+      parts.push_back(m->embed_image(tok.view({1, 1, 1}), P, i).view({1, 1, d}));
+    }
+    benchmark::DoNotOptimize(parts.back());
+  }
+  st.counters["frames/s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_RolloutRecompute)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+
+BENCHMARK_MAIN();
