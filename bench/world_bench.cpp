@@ -15,7 +15,8 @@ using namespace gaia::world;
 namespace {
 
 Config bench_config() {
-  Config c;  // default config: d 256, 6 layers, T 8, m 16, n 144, K 1024
+  Config c;  // default config
+  configure_allocator();
   if (const char* t = std::getenv("GAIA_BENCH_THREADS")) set_torch_threads(std::atoi(t));
   return c;
 }

@@ -6,10 +6,12 @@
 
 #include "common.h"
 #include "gaia/core/error.h"
+#include "gaia/torch/tensor_io.h"
 
 int main(int argc, char** argv) {
   // FFmpeg's own log lines would break the "one clear error line" rule; our errors say what went wrong.
   ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);
+  gaia::configure_allocator();
   CLI::App app{"gaia: generative world model for autonomous driving (GAIA-1 in C++)", "gaia"};
   app.set_version_flag("--version", std::string("gaia ") + GAIA_VERSION);
   app.require_subcommand(1);

@@ -1,6 +1,7 @@
 #include "gaia/torch/tensor_io.h"
 
 #include <dlfcn.h>
+#include <malloc.h>
 
 #include <regex>
 #include <thread>
@@ -30,6 +31,11 @@ void set_torch_threads(int n) {
   // reference BLAS has no such call).
   using SetThreads = void (*)(int);
   if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(n);
+}
+
+void configure_allocator() {
+  mallopt(M_MMAP_MAX, 0);                 // every block from the heap (brk), reusable after free
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);     // return heap memory to the OS only above 1 GiB of free top
 }
 
 torch::Dtype to_torch(DType t) {

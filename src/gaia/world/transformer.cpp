@@ -22,13 +22,20 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch
 #if TORCH_VERSION_MAJOR >= 2
   if (offset == 0 && Lq == Lk) return at::scaled_dot_product_attention(q, k, v, {}, 0.0, /*is_causal=*/true);
 #endif
-  auto att = torch::matmul(q, k.transpose(-2, -1)) * (1.0 / std::sqrt(double(q.size(-1))));  // [B, H, Lq, Lk]
+  const int64_t B = q.size(0), H = q.size(1), hd = q.size(3);
+  const double scale = 1.0 / std::sqrt(double(hd));
+  auto q3 = q.reshape({B * H, Lq, hd}), kt = k.reshape({B * H, Lk, hd}).transpose(1, 2);
+  torch::Tensor att;  // [B * H, Lq, Lk]
   if (Lq > 1) {
+    // Additive causal mask fused into the product (one pass over the L x L scores instead of three).
     auto qi = torch::arange(offset, offset + Lq, q.options().dtype(torch::kLong)).unsqueeze(1);
     auto kj = torch::arange(Lk, q.options().dtype(torch::kLong)).unsqueeze(0);
-    att = att.masked_fill(kj > qi, -std::numeric_limits<float>::infinity());
+    auto mask = torch::zeros({Lq, Lk}, q.options()).masked_fill_(kj > qi, -std::numeric_limits<float>::infinity());
+    att = torch::baddbmm(mask, q3, kt, /*beta=*/1.0, /*alpha=*/scale);
+  } else {
+    att = torch::bmm(q3, kt) * scale;
   }
-  return torch::matmul(torch::softmax(att, -1), v);  // [B, H, Lq, hd]
+  return torch::bmm(torch::softmax(att, -1), v.reshape({B * H, Lk, hd})).view({B, H, Lq, hd});
 }
 
 }  // namespace
