@@ -85,7 +85,10 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
 
 TEST(WorldCli, BadInputsAreClearErrors) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) GTEST_SKIP() << "needs TrainResumesEvaluatesAndGenerates first";
+  if (!fs::exists(p.run / "world.safetensors")) {  // ctest runs each test in its own process: train here
+    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
   const std::string w = " --world " + q(p.run / "world.safetensors") + p.tiny();
   write_file_atomic(p.dir / "two.csv", "speed,curvature\n5,0\n5,0.01\n");
   auto r = test::run_gaia("generate" + w + " --frames 3 --actions " + q(p.dir / "two.csv") + " --out " + q(p.dir / "x"));

@@ -36,5 +36,7 @@ void register_synth(CLI::App& app);
 void register_tokenizer(CLI::App& app);  // also registers `gaia tokenize`
 void register_world(CLI::App& app);
 void register_generate(CLI::App& app);
+void register_decoder(CLI::App& app);   // gaia decoder train|eval
+void register_decode(CLI::App& app);    // gaia decode
 
 }  // namespace gaia::app

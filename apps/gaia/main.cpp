@@ -23,6 +23,8 @@ int main(int argc, char** argv) {
   gaia::app::register_tokenizer(app);
   gaia::app::register_world(app);
   gaia::app::register_generate(app);
+  gaia::app::register_decoder(app);
+  gaia::app::register_decode(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

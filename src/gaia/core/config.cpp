@@ -132,6 +132,8 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("decoder.attn_levels", &v.attn_levels));
   f.push_back(field("decoder.heads", &v.heads));
   f.push_back(field("decoder.token_embed_dim", &v.token_embed_dim));
+  f.push_back(field("decoder.cond_image", &v.cond_image));
+  f.push_back(field("decoder.schedule_shift", &v.schedule_shift));
   f.push_back(field("decoder.frames", &v.frames));
   f.push_back(field("decoder.token_dropout", &v.token_dropout));
   f.push_back(field("decoder.ddim_steps", &v.ddim_steps));
@@ -231,6 +233,12 @@ void Config::validate() const {
        "data.world_fps must be in (0, data.native_fps]");
   need(decoder.frames >= 3, "decoder.frames must be >= 3");
   need(decoder.channel_mult.size() >= 1, "decoder.channel_mult must not be empty");
+  need(decoder.channels % decoder.heads == 0, "decoder.channels must be divisible by decoder.heads");
+  need(decoder.frames % 2 == 1, "decoder.frames must be odd (interpolation windows start and end on a context frame)");
+  need(data.height % (1 << (decoder.channel_mult.size() - 1)) == 0 &&
+           data.width % (1 << (decoder.channel_mult.size() - 1)) == 0,
+       "data.height and data.width must be divisible by 2^(len(decoder.channel_mult) - 1)");
+  need(decoder.schedule_shift > 0, "decoder.schedule_shift must be positive");
 }
 
 std::string Config::to_yaml() {

@@ -74,6 +74,10 @@ struct DecoderConfig {
   std::vector<int> attn_levels{2};  // levels (0 = full resolution) that get spatial attention
   int heads = 4;
   int token_embed_dim = 64;      // conditioning token embedding width
+  // Also condition on the tokenizer decoder's image of the tokens (a coarse frame, as in cascaded diffusion): the
+  // diffusion model then learns detail and temporal consistency rather than the whole image, which a CPU-sized
+  // model can learn in hours. The paper conditions on tokens alone (paper.yaml: false).
+  bool cond_image = true;
   int frames = 7;                // T'; paper §4.3: T' = 7
   double token_dropout = 0.15;   // paper §2.4: p = 0.15
   int ddim_steps = 50;           // paper §5.2: 50 DDIM steps
@@ -83,6 +87,7 @@ struct DecoderConfig {
   // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6
   double lr = 5e-5, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.99, grad_clip = 1.0, final_lr = 1e-6;
   int warmup_steps = 250, steps = 10000, batch_size = 4;
+  double schedule_shift = 1.0;   // cosine log-SNR shift (Hoogeboom et al. 2023); < 1 = noisier, for large frames
 };
 
 struct RunConfig {

@@ -93,6 +93,7 @@ ParamCount world_params(const Config& cfg) {
 }
 
 ParamCount decoder_params(const Config& cfg) {
+  // Mirrors decoder/unet.cpp (a test checks the count against the built model).
   const auto& v = cfg.decoder;
   const int L = static_cast<int>(v.channel_mult.size());
   const int64_t ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
@@ -100,36 +101,38 @@ ParamCount decoder_params(const Config& cfg) {
     for (int a : v.attn_levels) if (a == level) return true;
     return false;
   };
-  // Factorised attention (Ho et al. 2022): spatial attention within a frame + temporal attention across
-  // frames, the latter with a relative-position bias table of 2T'-1 entries per head.
-  auto st_attn = [&](int64_t c) { return attention(c) + attention(c) + int64_t(2 * v.frames - 1) * v.heads; };
-  int64_t p = 0, token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the dropped-token embedding
+  // Factorised attention (Ho et al. 2022): temporal attention across frames in every layer (LayerNorm, qkv, proj,
+  // a relative-position bias of 2T'-1 entries per head), spatial attention within a frame at attn_levels.
+  auto temporal = [&](int64_t c) { return layer_norm(c) + linear(c, 3 * c) + linear(c, c) + int64_t(2 * v.frames - 1) * v.heads; };
+  auto layer = [&](int64_t cin, int64_t cout, int level) {
+    return res_block(cin, cout, emb) + (has_attn(level) ? attention(cout) : 0) + temporal(cout);
+  };
+  int64_t p = 0, token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the "no token" embedding
   p += token_embedding;
   p += linear(ch, emb) + linear(emb, emb);  // diffusion-time MLP on a sinusoidal embedding
   p += 3 * emb;                              // frame-rate embedding: 6.25 / 12.5 / 25 Hz
-  // Input: noisy frame (3) + clean context frame (3) + context mask (1) + upsampled token embedding (E).
+  // Input: noisy frame (3) + context mask (1) + upsampled token embedding (E) [+ tokenizer-decoded image (3)].
   int64_t c = ch * v.channel_mult[0];
-  p += conv(3 + 3 + 1 + E, c, 3);
+  p += conv(3 + 1 + E + (v.cond_image ? 3 : 0), c, 3);
   std::vector<int64_t> skips{c};
   for (int i = 0; i < L; ++i) {
     int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
+    p += conv(E, c, 1);  // token embedding added at the start of each level
     for (int r = 0; r < v.res_blocks; ++r) {
-      p += res_block(c, co, emb);
+      p += layer(c, co, i);
       c = co;
-      if (has_attn(i)) p += st_attn(c);
       skips.push_back(c);
     }
     if (i + 1 < L) { p += conv(c, c, 3); skips.push_back(c); }
   }
-  p += res_block(c, c, emb) + st_attn(c) + res_block(c, c, emb);
+  p += 2 * layer(c, c, L - 1);
   for (int i = L - 1; i >= 0; --i) {
     int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
     for (int r = 0; r < v.res_blocks + 1; ++r) {
       int64_t skip = skips.back();
       skips.pop_back();
-      p += res_block(c + skip, co, emb);
+      p += layer(c + skip, co, i);
       c = co;
-      if (has_attn(i)) p += st_attn(c);
     }
     if (i > 0) p += conv(c, c, 3);
   }

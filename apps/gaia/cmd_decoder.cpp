@@ -1,0 +1,256 @@
+// gaia decoder train|eval and gaia decode: the video diffusion decoder of §2.4 (tokens -> 25 Hz video, §5.2).
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/npy.h"
+#include "gaia/core/progress.h"
+#include "gaia/core/safetensors.h"
+#include "gaia/data/gif.h"
+#include "gaia/data/video_io.h"
+#include "gaia/decoder/evaluate.h"
+#include "gaia/decoder/io.h"
+#include "gaia/decoder/trainer.h"
+#include "gaia/decoder/video.h"
+#include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/torch/tensor_io.h"
+
+namespace gaia::app {
+
+namespace {
+
+// Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
+// dataset episode directory (its tokens.npy) -> int64 [F, N, h, w].
+torch::Tensor read_tokens(const fs::path& p) {
+  torch::Tensor t;
+  if (!fs::exists(p)) fail("{}: no such file or directory", p.string());
+  if (fs::is_directory(p)) {
+    if (!fs::exists(p / "tokens.npy")) fail("{}: not a token episode (no tokens.npy)", p.string());
+    return read_tokens(p / "tokens.npy");
+  }
+  if (p.extension() == ".npy") {
+    NpyArray a = npy_read(p);
+    auto v = a.to_int64();
+    t = torch::tensor(v, torch::kLong).view(a.shape);
+  } else {
+    SafetensorsFile f(p);
+    if (!f.contains("tokens")) fail("{}: no 'tokens' tensor (expected a gaia generate rollout)", p.string());
+    t = tensor_from_view(f.get("tokens")).to(torch::kLong);
+  }
+  if (t.dim() == 3) t = t.unsqueeze(0);
+  if (t.dim() != 4) fail("{}: tokens must be [frames, h, w] or [futures, frames, h, w], got {} dimensions", p.string(), t.dim());
+  if (t.size(1) == 0 || t.size(0) == 0) fail("{}: the token file is empty (0 frames)", p.string());
+  return t;
+}
+
+// [F, M, 3, H, W] in [-1, 1] -> M frames with the futures side by side.
+std::vector<cv::Mat> to_frames(const torch::Tensor& v) {
+  std::vector<cv::Mat> out;
+  const int64_t F = v.size(0), M = v.size(1), H = v.size(3), W = v.size(4);
+  auto cpu = v.to(torch::kCPU).contiguous();
+  for (int64_t k = 0; k < M; ++k) {
+    std::vector<cv::Mat> cols;
+    for (int64_t f = 0; f < F; ++f) {
+      cv::Mat m(int(H), int(W), CV_8UC3);
+      tokenizer::tensor_to_image(cpu[f][k], m.data);
+      cols.push_back(m);
+    }
+    cv::Mat frame;
+    cv::hconcat(cols, frame);
+    out.push_back(frame);
+  }
+  return out;
+}
+
+std::vector<int> parse_steps(const std::string& s) {
+  std::vector<int> out;
+  size_t i = 0;
+  while (i < s.size()) {
+    size_t j = s.find(',', i);
+    if (j == std::string::npos) j = s.size();
+    try {
+      out.push_back(std::stoi(s.substr(i, j - i)));
+    } catch (const std::exception&) {
+      fail("--steps: '{}' is not a comma-separated list of integers", s);
+    }
+    if (out.back() < 1) fail("--steps: step counts must be >= 1");
+    i = j + 1;
+  }
+  if (out.empty()) fail("--steps: empty list");
+  return out;
+}
+
+}  // namespace
+
+void register_decoder(CLI::App& app) {
+  auto* dec = app.add_subcommand("decoder", "video diffusion decoder (§2.4): train, eval");
+  dec->require_subcommand(1);
+  {
+    auto* cmd = dec->add_subcommand("train", "train the video decoder on a dataset (resumes from OUT/checkpoint)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto o = std::make_shared<decoder::DecoderTrainOptions>();
+    auto dataset = std::make_shared<std::string>(), tok = std::make_shared<std::string>();
+    cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
+    cmd->add_option("--tokenizer", *tok, "tokenizer weights (frozen; gives the conditioning tokens)")->required();
+    cmd->add_option("--steps", o->steps, "total steps (default: config decoder.steps)");
+    cmd->add_option("--val-every", o->val_every, "steps between validations");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, decoder.safetensors, metrics.jsonl)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      apply_threads(c);
+      if (flags->out.empty()) fail("gaia decoder train: --out RUN_DIR is required");
+      decoder::DecoderTrainOptions opt = *o;
+      opt.dataset = *dataset;
+      opt.tokenizer = *tok;
+      opt.out = flags->out;
+      std::unique_ptr<ProgressBar> bar;
+      auto r = decoder::train_decoder(
+          c, opt,
+          [&](const decoder::DecoderStepLog& l) {
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "decoder");
+            std::string info = fmt::format("loss {:.4f} {:.1f} s/step {}", l.loss, l.seconds, l.task);
+            if (l.validation && !l.val.empty())
+              info += fmt::format(" | val {:.4f} x0 PSNR {:.1f} dB", l.val.value("loss", 0.0), l.val.value("psnr_x0_t0.5", 0.0));
+            bar->update(l.step, info);
+          },
+          [](const std::string& n) { std::fprintf(stderr, "decoder: %s\n", n.c_str()); });
+      if (bar) bar->finish();
+      const int total = opt.steps > 0 ? opt.steps : c.decoder.steps;
+      std::printf("decoder: step %d%s; last validation %s\n", r.final_step,
+                  r.final_step >= total ? " (done)" : " (checkpointed)", r.last_val.dump().c_str());
+    });
+  }
+  {
+    auto* cmd = dec->add_subcommand("eval", "PSNR and flicker of the video decoder vs the tokenizer's decoder on held-out clips");
+    auto flags = std::make_shared<SharedFlags>();
+    auto dataset = std::make_shared<std::string>(), tok = std::make_shared<std::string>(),
+         weights = std::make_shared<std::string>(), steps = std::make_shared<std::string>("50,20,10");
+    auto eo = std::make_shared<decoder::DecoderEvalOptions>();
+    cmd->add_option("DATASET", *dataset, "episode dataset (its validation episodes are decoded)")->required();
+    cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)")->required();
+    cmd->add_option("--tokenizer", *tok, "tokenizer weights")->required();
+    cmd->add_option("--clips", eo->clips, "held-out clips");
+    cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip");
+    cmd->add_option("--steps", *steps, "DDIM step counts to compare, e.g. 50,20,10");
+    add_shared_flags(cmd, flags.get(), "output directory (eval.json)");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      if (flags->out.empty()) fail("gaia decoder eval: --out DIR is required");
+      auto dev = parse_device(run.run.device);
+      Config dc;
+      auto model = decoder::load_decoder(*weights, dev, &dc);
+      auto t = tokenizer::load_tokenizer(*tok, dev);
+      if (t->cfg.codebook_size != model->K || t->cfg.downsample != model->D)
+        fail("{}: the decoder was trained with K = {}, D = {}; this tokenizer has K = {}, D = {}", *tok, model->K,
+             model->D, t->cfg.codebook_size, t->cfg.downsample);
+      decoder::DecoderEvalOptions o = *eo;
+      o.steps = parse_steps(*steps);
+      o.seed = uint64_t(run.run.seed);
+      std::unique_ptr<ProgressBar> bar;
+      auto j = decoder::evaluate_decoder(dc, model, t, *dataset, o, [&](int d, int total) {
+        if (!bar) bar = std::make_unique<ProgressBar>(total, "decoder eval (DDIM steps)");
+        bar->update(d);
+      });
+      if (bar) bar->finish();
+      fs::create_directories(flags->out);
+      write_file_atomic(fs::path(flags->out) / "eval.json", j.dump(2) + "\n");
+      std::printf("%s\n", j.dump(2).c_str());
+    });
+  }
+}
+
+void register_decode(CLI::App& app) {
+  auto* cmd = app.add_subcommand("decode", "tokens -> video (MP4, GIF, PNG contact sheet) with the video decoder (§5.2)");
+  auto flags = std::make_shared<SharedFlags>();
+  auto tokens = std::make_shared<std::string>(), tok = std::make_shared<std::string>(),
+       weights = std::make_shared<std::string>();
+  auto fast = std::make_shared<bool>(false);
+  auto steps = std::make_shared<int>(0);
+  auto fps = std::make_shared<double>(25.0), token_fps = std::make_shared<double>(6.25);
+  cmd->add_option("TOKENS", *tokens, "rollout.safetensors (gaia generate), tokens .npy [N, h, w], or a token episode dir")
+      ->required();
+  cmd->add_option("--tokenizer", *tok, "tokenizer weights (its decoder for --fast and the decoder's conditioning)")->required();
+  cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)");
+  cmd->add_flag("--fast", *fast, "decode frame by frame with the tokenizer's decoder (a quick preview)");
+  cmd->add_option("--ddim-steps", *steps, "DDIM steps (default: the decoder's config, paper §5.2: 50)");
+  cmd->add_option("--fps", *fps, "output frame rate: 6.25, 12.5 or 25 (temporal upsampling, §5.2)");
+  cmd->add_option("--token-fps", *token_fps, "frame rate of the token frames");
+  add_shared_flags(cmd, flags.get(), "output video path (.mp4; a .gif and a .png contact sheet are written beside it)");
+  cmd->callback([=] {
+    Config run = resolve_config(*flags);
+    apply_threads(run);
+    if (flags->out.empty()) fail("gaia decode: --out VIDEO.mp4 is required");
+    if (!*fast && weights->empty()) fail("gaia decode: give --decoder WEIGHTS, or --fast for the tokenizer's decoder");
+    auto dev = parse_device(run.run.device);
+    auto t = tokenizer::load_tokenizer(*tok, dev);
+    auto ids = read_tokens(*tokens);  // [F, N, h, w]
+    const int64_t F = ids.size(0), N = ids.size(1), gh = t->height / t->cfg.downsample, gw = t->width / t->cfg.downsample;
+    if (ids.size(2) != gh || ids.size(3) != gw)
+      fail("{}: token grid {}x{} does not match the tokenizer's {}x{} ({}x{} frames, D = {})", *tokens, ids.size(2),
+           ids.size(3), gh, gw, t->height, t->width, t->cfg.downsample);
+    if (ids.min().item<int64_t>() < 0 || ids.max().item<int64_t>() >= t->cfg.codebook_size)
+      fail("{}: token ids must be in [0, {}) (the tokenizer's codebook)", *tokens, t->cfg.codebook_size);
+    // The tokenizer's decoding of every token frame: the --fast output, and the video decoder's conditioning.
+    std::vector<torch::Tensor> cond_f;
+    {
+      torch::NoGradGuard ng;
+      for (int64_t f = 0; f < F; ++f) {
+        std::vector<torch::Tensor> parts;
+        for (int64_t s = 0; s < N; s += 16)
+          parts.push_back(t->decode_tokens(ids[f].slice(0, s, std::min(N, s + 16)).to(dev)).clamp(-1, 1));
+        cond_f.push_back(torch::cat(parts));
+      }
+    }
+    auto cond = torch::stack(cond_f);  // [F, N, 3, H, W]
+    torch::Tensor video;
+    double out_fps = *token_fps;
+    if (*fast) {
+      video = cond;
+    } else {
+      Config dc;
+      auto model = decoder::load_decoder(*weights, dev, &dc);
+      if (model->K != t->cfg.codebook_size || model->D != t->cfg.downsample)
+        fail("{}: the decoder was trained with K = {}, D = {}; the tokenizer has K = {}, D = {}", *weights, model->K,
+             model->D, t->cfg.codebook_size, t->cfg.downsample);
+      decoder::DecodeOptions o;
+      o.sample.steps = *steps > 0 ? *steps : dc.decoder.ddim_steps;
+      o.sample.mix_probability = dc.decoder.mix_probability;
+      o.sample.mix_weight = dc.decoder.mix_weight;
+      o.sample.seed = uint64_t(run.run.seed);
+      o.token_fps = *token_fps;
+      o.out_fps = *fps;
+      decoder::NoiseSchedule sched{-15.0, 15.0, dc.decoder.schedule_shift};
+      const int total = decoder::count_windows(N, dc.decoder.frames, o.token_fps, o.out_fps);
+      ProgressBar bar(total, "decode");
+      video = decoder::decode_video(model, sched, ids.to(dev), model->cfg.cond_image ? cond : torch::Tensor(), o,
+                                    [&](int d, int) { bar.update(d); });
+      bar.finish();
+      out_fps = *fps;
+    }
+    auto frames = to_frames(video);
+    fs::path out = flags->out;
+    if (out.has_parent_path()) fs::create_directories(out.parent_path());
+    data::write_video(out, frames, out_fps);
+    fs::path gif = fs::path(out).replace_extension(".gif"), png = fs::path(out).replace_extension(".png");
+    data::write_gif(gif, frames, out_fps);
+    std::vector<cv::Mat> sheet;
+    std::vector<std::string> labels;
+    const size_t every = std::max<size_t>(1, frames.size() / 12);
+    for (size_t k = 0; k < frames.size(); k += every) {
+      sheet.push_back(frames[k]);
+      labels.push_back(fmt::format("{:.2f} s", double(k) / out_fps));
+    }
+    data::write_png(png, synth::contact_sheet(sheet, labels, 4, std::min(512, frames[0].cols)));
+    std::printf("decoded %lld token frames x %lld futures -> %zu frames at %g Hz (%s): %s, %s, %s\n", (long long)N,
+                (long long)F, frames.size(), out_fps, *fast ? "tokenizer decoder" : "video decoder", out.c_str(),
+                gif.c_str(), png.c_str());
+  });
+}
+
+}  // namespace gaia::app

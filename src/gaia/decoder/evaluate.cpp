@@ -1,0 +1,118 @@
+#include "gaia/decoder/evaluate.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "gaia/core/error.h"
+#include "gaia/data/clip_sampler.h"
+#include "gaia/data/geofence.h"
+#include "gaia/decoder/trainer.h"
+#include "gaia/decoder/video.h"
+
+namespace gaia::decoder {
+
+double temporal_change(const torch::Tensor& f) {
+  if (f.size(0) < 2) return 0.0;
+  return ((f.slice(0, 1) - f.slice(0, 0, -1)).abs().mean().item<double>()) * 127.5;
+}
+
+namespace {
+
+double psnr(const torch::Tensor& a, const torch::Tensor& b) {  // [-1, 1] images -> PSNR on the [0, 1] scale
+  const double mse = (a.clamp(-1, 1) - b).pow(2).mean().item<double>() / 4.0;
+  return 10 * std::log10(1.0 / std::max(mse, 1e-12));
+}
+
+}  // namespace
+
+nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::ImageTokenizer& tok,
+                                const fs::path& dataset, const DecoderEvalOptions& o,
+                                const std::function<void(int, int)>& progress) {
+  torch::NoGradGuard ng;
+  const torch::Device dev = model->parameters().front().device();
+  data::Dataset ds(dataset);
+  auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  auto ids = split.val_geofence;
+  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  if (ids.empty()) ids = ds.ids();
+  auto eps = data::episode_indices(ds, ids);
+  const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz
+  std::vector<std::unique_ptr<data::Episode>> episodes;
+  std::vector<ClipRef> refs;
+  for (size_t e : eps) {
+    if (int(refs.size()) >= o.clips) break;
+    auto clips = data::enumerate_clips(ds, {e}, M, 25.0, 1e9);  // the first clip of each held-out episode
+    if (clips.empty()) continue;
+    refs.push_back({episodes.size(), clips[0].frames});
+    episodes.push_back(std::make_unique<data::Episode>(ds.episode(e)));
+  }
+  if (refs.empty()) fail("{}: no held-out episode has {} frames at 25 Hz for a {}-frame token clip", dataset.string(), M, N);
+  NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
+  DecodeOptions d;
+  d.sample.mix_probability = cfg.decoder.mix_probability;
+  d.sample.mix_weight = cfg.decoder.mix_weight;
+  d.sample.seed = o.seed;
+  const int windows = count_windows(N, cfg.decoder.frames, 6.25, 25.0);
+  int total = 0, done = 0;
+  for (int s : o.steps) total += int(refs.size()) * windows * s;
+
+  nlohmann::json out;
+  out["clips"] = refs.size();
+  out["token_frames"] = N;
+  out["frames_25hz"] = M;
+  std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
+  std::map<int, std::vector<double>> dif_key, dif_all, dif_key_change, dif_all_change, secs;
+  for (size_t c = 0; c < refs.size(); ++c) {
+    auto clip = load_clips(episodes, {refs[c]}, tok, true, dev);  // all 25 Hz frames, their tokens and decodings
+    auto gt = clip.frames[0];                                      // [M, 3, H, W]
+    auto key = torch::arange(0, M, 4, torch::kLong).to(dev);       // the 6.25 Hz frames
+    auto gt_key = gt.index_select(0, key);
+    auto tok_dec = clip.cond[0];  // the tokenizer decoder on every frame's own tokens
+    tok_key.push_back(psnr(tok_dec.index_select(0, key), gt_key));
+    tok_all.push_back(psnr(tok_dec, gt));
+    gt_key_change.push_back(temporal_change(gt_key));
+    gt_all_change.push_back(temporal_change(gt));
+    tok_key_change.push_back(temporal_change(tok_dec.index_select(0, key)));
+    tok_all_change.push_back(temporal_change(tok_dec));
+    auto tokens = clip.tokens.index_select(1, key);  // [1, N, h, w]
+    auto cond = model->cfg.cond_image ? clip.cond.index_select(1, key) : torch::Tensor();
+    for (int s : o.steps) {
+      d.sample.steps = s;
+      auto t0 = std::chrono::steady_clock::now();
+      auto video = decode_video(model, sched, tokens, cond, d, [&](int, int) {
+        done += s;
+        if (progress) progress(done, total);
+      })[0];
+      secs[s].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      dif_key[s].push_back(psnr(video.index_select(0, key), gt_key));
+      dif_all[s].push_back(psnr(video, gt));
+      dif_key_change[s].push_back(temporal_change(video.index_select(0, key)));
+      dif_all_change[s].push_back(temporal_change(video));
+    }
+  }
+  auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return v.empty() ? 0.0 : s / double(v.size());
+  };
+  const double gk = mean(gt_key_change), ga = mean(gt_all_change);
+  out["ground_truth"] = {{"change_6.25hz", gk}, {"change_25hz", ga}};
+  out["tokenizer_decoder"] = {{"psnr_6.25hz", mean(tok_key)}, {"psnr_25hz", mean(tok_all)},
+                              {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(tok_all_change) - ga},
+                              {"note", "frame by frame from every frame's own tokens (at 25 Hz it gets 4x the tokens)"}};
+  for (int s : o.steps) {
+    const double sec = mean(secs[s]);
+    out["video_decoder"][std::to_string(s)] = {
+        {"ddim_steps", s},
+        {"psnr_6.25hz", mean(dif_key[s])},
+        {"psnr_25hz", mean(dif_all[s])},
+        {"flicker_6.25hz", mean(dif_key_change[s]) - gk},
+        {"flicker_25hz", mean(dif_all_change[s]) - ga},
+        {"seconds_per_clip", sec},
+        {"seconds_per_ddim_step", sec / (windows * s)},  // one step of one T'-frame window (mixing included)
+        {"seconds_per_output_second", sec / ((M - 1) / 25.0)}};
+  }
+  return out;
+}
+
+}  // namespace gaia::decoder

@@ -1,0 +1,31 @@
+#pragma once
+// `gaia decoder eval` (§5.2 targets): held-out clips decoded from their true tokens by the video diffusion decoder
+// and by the tokenizer's own frame-by-frame decoder; per-frame PSNR against the real frames and temporal flicker,
+// at the token rate and at 25 Hz, for several DDIM step counts, with timings.
+#include <functional>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/core/config.h"
+#include "gaia/decoder/unet.h"
+#include "gaia/tokenizer/autoencoder.h"
+
+namespace gaia::decoder {
+
+// Mean absolute difference between consecutive frames (0-255 scale), averaged over the sequence; frames [M, 3, H, W]
+// in [-1, 1]. The flicker is this for the generated frames minus this for the ground truth.
+double temporal_change(const torch::Tensor& frames);
+
+struct DecoderEvalOptions {
+  int clips = 2;                   // held-out clips
+  int token_frames = 8;            // N token frames at 6.25 Hz per clip (-> 4N - 3 frames at 25 Hz)
+  std::vector<int> steps{50, 20, 10};  // DDIM step counts to compare (§5.2 uses 50)
+  uint64_t seed = 0;
+};
+
+nlohmann::json evaluate_decoder(const Config& decoder_config, VideoUNet& model, tokenizer::ImageTokenizer& tok,
+                                const fs::path& dataset, const DecoderEvalOptions& o,
+                                const std::function<void(int, int)>& progress = {});
+
+}  // namespace gaia::decoder

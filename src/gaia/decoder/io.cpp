@@ -1,0 +1,42 @@
+#include "gaia/decoder/io.h"
+
+#include "gaia/core/error.h"
+#include "gaia/core/safetensors.h"
+#include "gaia/torch/tensor_io.h"
+
+namespace gaia::decoder {
+
+void save_decoder(const VideoUNet& m, const Config& c, const fs::path& path, bool half) {
+  Config copy = c;
+  save_module(*m, path,
+              {{"gaia.component", "decoder"}, {"gaia.config", copy.to_yaml()}, {"gaia.decoder.K", std::to_string(m->K)},
+               {"gaia.decoder.D", std::to_string(m->D)}},
+              half);
+}
+
+VideoUNet load_decoder(const fs::path& path, const torch::Device& device, Config* config_out) {
+  Config c;
+  int64_t K = 0, D = 0;
+  {
+    SafetensorsFile f(path);
+    auto md = f.metadata();
+    if (!md.count("gaia.config") || md["gaia.component"] != "decoder" || !md.count("gaia.decoder.K"))
+      fail("{}: not a gaia video decoder weights file (no decoder metadata)", path.string());
+    c.apply_yaml(md["gaia.config"], path.string() + " [metadata]");
+    c.validate();
+    try {
+      K = std::stoll(md["gaia.decoder.K"]);
+      D = std::stoll(md["gaia.decoder.D"]);
+    } catch (const std::exception&) {
+      fail("{}: metadata gaia.decoder.K / gaia.decoder.D are not integers", path.string());
+    }
+  }
+  VideoUNet m(c.decoder, K, D);
+  load_module(*m, path);
+  m->to(device);
+  m->eval();
+  if (config_out) *config_out = c;
+  return m;
+}
+
+}  // namespace gaia::decoder

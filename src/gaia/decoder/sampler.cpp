@@ -1,0 +1,85 @@
+#include "gaia/decoder/sampler.h"
+
+#include "gaia/core/error.h"
+#include "gaia/decoder/tasks.h"
+
+namespace gaia::decoder {
+
+torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
+                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn) {
+  if (steps < 1) fail("decoder: DDIM needs at least 1 step, got {}", steps);
+  auto times = ddim_times(steps);
+  auto opt = torch::TensorOptions().dtype(torch::kFloat64);
+  for (int i = 0; i < steps; ++i) {
+    const double t = times[size_t(i)], s = times[size_t(i) + 1];
+    auto tt = torch::tensor({t}, opt), ss = torch::tensor({s}, opt);
+    const double at = sched.alpha(tt).item<double>(), st = sched.sigma(tt).item<double>();
+    const double as = sched.alpha(ss).item<double>(), sg = sched.sigma(ss).item<double>();
+    auto v = v_fn(z, t);
+    auto x_hat = at * z - st * v, eps_hat = st * z + at * v;
+    z = as * x_hat + sg * eps_hat;
+  }
+  return z;
+}
+
+torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const WindowInput& in, const SampleOptions& o) {
+  torch::NoGradGuard ng;
+  const auto& x0 = in.frames;
+  const int64_t B = x0.size(0), T = x0.size(1);
+  auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
+  auto gen = at::detail::createCPUGenerator(o.seed);
+  auto z = torch::randn(x0.sizes(), gen, x0.options().device(torch::kCPU)).to(x0.device());
+  std::mt19937_64 rng(o.seed ^ 0x9e3779b97f4a7c15ULL);
+  std::bernoulli_distribution mix(o.mix_probability);
+  DenoiserInput di;
+  di.context = in.context;
+  di.tokens = in.tokens;
+  di.cond_image = in.cond_image;
+  di.rate = torch::full({B}, in.rate, torch::TensorOptions().dtype(torch::kLong).device(x0.device()));
+  auto v_fn = [&](const torch::Tensor& zt, double t) {
+    di.x = ctx * x0 + (1 - ctx) * zt;  // context frames clean, the rest at noise level t
+    di.time = (1 - in.context.to(torch::kFloat32)) * float(t);
+    di.temporal = in.temporal;
+    auto v = model->forward(di);
+    if (in.temporal && o.mix_probability > 0 && mix(rng)) {
+      di.temporal = false;  // §5.2: denoise every frame as an image, average with the video prediction
+      v = o.mix_weight * model->forward(di) + (1 - o.mix_weight) * v;
+    }
+    return v;
+  };
+  z = ddim_loop(z, o.steps, sched, v_fn);
+  return (ctx * x0 + (1 - ctx) * z).clamp(-1, 1);
+}
+
+std::vector<Window> backward_windows(int64_t N, int T) {
+  if (N < 1) fail("decoder: nothing to decode (0 frames)");
+  std::vector<Window> w;
+  if (N <= T) {
+    w.push_back({0, std::vector<bool>(size_t(N), false)});
+    return w;
+  }
+  int64_t first = N - T;  // first frame decoded so far
+  w.push_back({first, std::vector<bool>(size_t(T), false)});
+  while (first > 0) {
+    const int64_t start = std::max<int64_t>(0, first - (T - kOverlapFrames));
+    Window x{start, std::vector<bool>(size_t(T), false)};
+    for (int64_t i = 0; i < T; ++i) x.context[size_t(i)] = start + i >= first;
+    w.push_back(x);
+    first = start;
+  }
+  return w;
+}
+
+std::vector<Window> upsample_windows(int64_t M, int T) {
+  if (T % 2 == 0) fail("decoder: upsampling windows need an odd number of frames, got {}", T);
+  std::vector<Window> w;
+  for (int64_t s = 0; s + 1 < M; s += T - 1) {
+    const int64_t len = std::min<int64_t>(T, M - s);
+    Window x{s, std::vector<bool>(size_t(len), false)};
+    for (int64_t i = 0; i < len; ++i) x.context[size_t(i)] = (s + i) % 2 == 0;
+    w.push_back(x);
+  }
+  return w;
+}
+
+}  // namespace gaia::decoder

@@ -1,0 +1,53 @@
+#pragma once
+// Sampling of the video decoder (§5.2): DDIM over one window of frames, with the paper's image/video mixing, and
+// the windows of the full decoding schedule (backward autoregressive decoding at the token rate, then temporal
+// upsampling 6.25 -> 12.5 -> 25 Hz by interpolation).
+#include <functional>
+#include <random>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "gaia/decoder/diffusion.h"
+#include "gaia/decoder/unet.h"
+
+namespace gaia::decoder {
+
+// The deterministic DDIM loop from pure noise z (at t = 1) to t = 0 over `steps` uniform steps. v_fn(z, t) returns
+// the v prediction at time t. Generic so that a test can run it with an analytic denoiser.
+torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
+                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn);
+
+struct SampleOptions {
+  int steps = 50;                // §5.2: 50 DDIM steps
+  double mix_probability = 0.25;  // §5.2: per step, with this probability ...
+  double mix_weight = 0.5;        // ... v = w v_image + (1 - w) v_video (temporal layers off for v_image)
+  uint64_t seed = 0;
+};
+
+// One window: context frames are kept as given, the others are generated.
+struct WindowInput {
+  torch::Tensor frames;      // [B, T, 3, H, W] clean frames where context, anything elsewhere
+  torch::Tensor context;     // [B, T] float, 1 = context
+  torch::Tensor tokens;      // [B, T, h, w] int64, K where a frame has no tokens
+  torch::Tensor cond_image;  // [B, T, 3, H, W] (zeros where no tokens); may be undefined if the model has no cond_image
+  int rate = 0;              // tasks.h kRates index of this window's frames
+  bool temporal = true;
+};
+// -> [B, T, 3, H, W] in [-1, 1]. The paper mixes eps; v and eps are affine in each other at a fixed x_t and t, so
+// mixing v with the same weights is the same thing.
+torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const WindowInput& in, const SampleOptions& o);
+
+// A window of the decoding schedule over a sequence of frames.
+struct Window {
+  int64_t start = 0;           // first frame of the sequence in the window
+  std::vector<bool> context;   // per window frame: already known (given clean)
+};
+// §5.2, backwards: decode the last T' frames, then windows of T' frames ending with kOverlapFrames = 2 already decoded
+// frames, moving towards the start (the first window may then hold more context frames). N < T' -> one window.
+std::vector<Window> backward_windows(int64_t N, int T);
+// Upsampling of a sequence of M = 2N - 1 frames whose even positions are known: windows of T' (odd) frames that
+// start and end on known frames; the last one may be shorter.
+std::vector<Window> upsample_windows(int64_t M, int T);
+
+}  // namespace gaia::decoder

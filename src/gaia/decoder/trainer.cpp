@@ -1,0 +1,240 @@
+#include "gaia/decoder/trainer.h"
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <map>
+
+#include "gaia/core/error.h"
+#include "gaia/data/clip_sampler.h"
+#include "gaia/data/geofence.h"
+#include "gaia/decoder/io.h"
+#include "gaia/eval/metrics.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/train/checkpoint.h"
+#include "gaia/train/ema.h"
+#include "gaia/train/optim.h"
+#include "gaia/train/schedule.h"
+
+namespace gaia::decoder {
+
+namespace F = torch::nn::functional;
+
+Clips load_clips(const std::vector<std::unique_ptr<data::Episode>>& episodes, const std::vector<ClipRef>& refs,
+                 tokenizer::ImageTokenizer& tok, bool with_cond, const torch::Device& dev) {
+  torch::NoGradGuard ng;
+  std::vector<torch::Tensor> xs;
+  for (const auto& r : refs)
+    for (int64_t i : r.frames) {
+      cv::Mat f = episodes.at(r.episode)->frame_bgr(i);
+      if (f.rows != tok->height || f.cols != tok->width)
+        fail("{}: frames are {}x{}, the tokenizer works at {}x{}", episodes[r.episode]->dir().string(), f.rows, f.cols,
+             tok->height, tok->width);
+      xs.push_back(tokenizer::image_to_tensor(f.data, f.rows, f.cols));
+    }
+  const int64_t B = int64_t(refs.size()), T = int64_t(refs.at(0).frames.size());
+  auto x = torch::stack(xs).to(dev);  // [B*T, 3, H, W]
+  Clips c;
+  c.frames = x.view({B, T, 3, x.size(2), x.size(3)});
+  auto ids = tok->tokenize(x);        // [B*T, h, w]
+  c.tokens = ids.view({B, T, ids.size(1), ids.size(2)});
+  if (with_cond) c.cond = tok->decode_tokens(ids).clamp(-1, 1).view_as(c.frames);
+  return c;
+}
+
+TaskBatch make_task_batch(const Clips& clips, const FrameMasks& masks, int rate, double t, double token_dropout,
+                          const NoiseSchedule& sched, int64_t K, int64_t D) {
+  const auto& x = clips.frames;
+  const int64_t B = x.size(0), T = x.size(1), h = clips.tokens.size(2), w = clips.tokens.size(3);
+  auto dev = x.device();
+  std::vector<float> ctx_v(masks.context.begin(), masks.context.end()), tok_v(masks.tokens.begin(), masks.tokens.end());
+  auto ctx = torch::tensor(ctx_v).to(dev).view({1, T}).expand({B, T}).contiguous();  // [B, T]
+  auto has_tok = torch::tensor(tok_v).to(dev).view({1, T, 1, 1});                    // [1, T, 1, 1]
+  auto keep = (torch::rand({B, T, h, w}, x.options()) >= token_dropout).to(x.dtype()) * has_tok;  // [B, T, h, w]
+  TaskBatch b;
+  b.input.tokens = torch::where(keep > 0, clips.tokens, torch::full_like(clips.tokens, K));
+  if (clips.cond.defined()) {
+    auto keep_px = keep.repeat_interleave(D, 2).repeat_interleave(D, 3).unsqueeze(2);  // [B, T, 1, H, W]
+    b.input.cond_image = clips.cond * keep_px;
+  }
+  auto tt = torch::full({B, T}, t, x.options());
+  auto time = tt * (1 - ctx);  // context frames are clean: time 0
+  auto alpha = sched.alpha(time).view({B, T, 1, 1, 1}), sigma = sched.sigma(time).view({B, T, 1, 1, 1});
+  auto eps = torch::randn_like(x);
+  auto c5 = ctx.view({B, T, 1, 1, 1});
+  b.input.x = c5 * x + (1 - c5) * add_noise(x, eps, alpha, sigma);
+  b.input.context = ctx;
+  b.input.time = time;
+  b.input.rate = torch::full({B}, rate, torch::TensorOptions().dtype(torch::kLong).device(dev));
+  b.input.temporal = masks.temporal;
+  b.v_true = v_target(x, eps, alpha, sigma);
+  b.weight = 1 - ctx;
+  return b;
+}
+
+namespace {
+
+struct ClipPool {
+  std::vector<std::unique_ptr<data::Episode>> episodes;
+  std::vector<std::vector<ClipRef>> by_rate;  // [3] clips at 6.25, 12.5, 25 Hz
+};
+
+ClipPool make_pool(const data::Dataset& ds, const std::vector<size_t>& eps, int T, bool all_rates) {
+  ClipPool p;
+  std::map<size_t, size_t> pos;
+  for (size_t e : eps) {
+    pos[e] = p.episodes.size();
+    p.episodes.push_back(std::make_unique<data::Episode>(ds.episode(e)));
+  }
+  p.by_rate.resize(3);
+  for (int r = 0; r < (all_rates ? 3 : 1); ++r)
+    for (auto& c : data::enumerate_clips(ds, eps, T, kRates[r], 0.5))
+      p.by_rate[size_t(r)].push_back({pos.at(c.episode), c.frames});
+  return p;
+}
+
+}  // namespace
+
+DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& opt,
+                                 const std::function<void(const DecoderStepLog&)>& on_step,
+                                 const std::function<void(const std::string&)>& on_note) {
+  const auto& dc = cfg.decoder;
+  const torch::Device dev = parse_device(cfg.run.device);
+  DecoderTrainResult result;
+  auto note = [&](const std::string& s) {
+    if (on_note) on_note(s);
+  };
+  auto tok = tokenizer::load_tokenizer(opt.tokenizer, dev);
+  for (auto& p : tok->parameters()) p.set_requires_grad(false);
+  const int64_t K = tok->cfg.codebook_size, D = tok->cfg.downsample;
+  if (tok->height != cfg.data.height || tok->width != cfg.data.width)
+    fail("{}: the tokenizer works at {}x{}, the config's data size is {}x{}", opt.tokenizer.string(), tok->height,
+         tok->width, cfg.data.height, cfg.data.width);
+
+  data::Dataset ds(opt.dataset);
+  data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  auto val_ids = split.val_geofence;
+  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  const int T = dc.frames;
+  ClipPool train = make_pool(ds, data::episode_indices(ds, split.train), T, true);
+  for (int r = 0; r < 3; ++r)
+    if (train.by_rate[size_t(r)].empty())
+      fail("{}: no training clip of {} frames at {} Hz (decoder.frames); episodes are too short", opt.dataset.string(),
+           T, kRates[r]);
+  ClipPool val = make_pool(ds, data::episode_indices(ds, val_ids), T, false);
+  std::vector<ClipRef> val_refs;
+  if (!val.by_rate[0].empty()) {
+    const size_t n = val.by_rate[0].size(), k = std::min<size_t>(size_t(opt.val_clips), n);
+    for (size_t i = 0; i < k; ++i) val_refs.push_back(val.by_rate[0][i * n / k]);  // spread over the held-out set
+  } else {
+    note("no validation clips (no held-out episode long enough): validation skipped");
+  }
+
+  torch::manual_seed(cfg.run.seed);
+  VideoUNet model(dc, K, D), ema(dc, K, D);
+  model->to(dev);
+  ema->to(dev);
+  train::ema_copy(*ema, *model);
+  auto optim = train::make_adamw(model->parameters(), dc.lr, dc.weight_decay, dc.beta1, dc.beta2);
+  const int total = opt.steps > 0 ? opt.steps : dc.steps;
+  train::WarmupCosine sched{dc.lr, dc.final_lr, dc.warmup_steps, total};
+  NoiseSchedule noise{-15.0, 15.0, dc.schedule_shift};
+  note(fmt::format("3D U-Net with {:.2f}M parameters, K = {}, D = {}, T' = {}", model->parameter_count() / 1e6, K, D, T));
+
+  fs::path ckpt = opt.out / "checkpoint";
+  int step = 0;
+  if (train::has_checkpoint(ckpt)) {
+    auto st = train::load_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}},
+                                     {{"decoder", optim.get()}});
+    step = st.step;
+    result.resumed = true;
+    note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+  }
+  fs::create_directories(opt.out);
+  std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
+  auto save = [&]() {
+    train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", optim.get()}},
+                           {step, {{"config", cfg.name}}});
+  };
+  // Validation: v loss of the EMA weights on fixed held-out clips (video task, 6.25 Hz) at t' = 0.25, 0.5, 0.75
+  // with fixed noise, and the PSNR of the one-step estimate x_hat at t' = 0.5.
+  auto validate = [&]() {
+    nlohmann::json v;
+    if (val_refs.empty()) return v;
+    torch::NoGradGuard ng;
+    ema->eval();
+    auto clips = load_clips(val.episodes, val_refs, tok, dc.cond_image, dev);
+    double loss = 0, psnr = 0;
+    for (double t : {0.25, 0.5, 0.75}) {
+      torch::manual_seed(cfg.run.seed + 12345);
+      auto b = make_task_batch(clips, task_masks(Task::kVideo, T), 0, t, 0.0, noise, K, D);
+      auto vp = ema->forward(b.input);
+      loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
+      if (t == 0.5) {
+        auto tt = torch::full({1}, t);
+        auto xh = x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)).clamp(-1, 1);
+        auto mse = (xh - clips.frames).pow(2).mean().item<double>() / 4.0;  // [-1, 1] -> [0, 1] range
+        psnr = 10 * std::log10(1.0 / std::max(mse, 1e-12));
+      }
+    }
+    v["loss"] = loss;
+    v["psnr_x0_t0.5"] = psnr;
+    return v;
+  };
+
+  model->train();
+  int steps_this_run = 0;
+  while (step < total) {
+    auto t0 = std::chrono::steady_clock::now();
+    std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
+    torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
+    auto draw = draw_task(rng);
+    const auto& pool = train.by_rate[size_t(draw.rate)];
+    std::vector<ClipRef> refs;
+    std::uniform_int_distribution<size_t> pick(0, pool.size() - 1);
+    for (int i = 0; i < dc.batch_size; ++i) refs.push_back(pool[pick(rng)]);
+    auto clips = load_clips(train.episodes, refs, tok, dc.cond_image, dev);
+    const double t = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
+    auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D);
+    const double lr = sched(step);
+    train::set_lr(*optim, lr);
+    auto loss = v_loss(model->forward(b.input), b.v_true, b.weight, dc.w_l1, dc.w_l2);
+    const double lv = loss.item<double>();
+    if (!std::isfinite(lv)) fail("video decoder training diverged at step {} (loss is not finite)", step);
+    optim->zero_grad();
+    loss.backward();
+    const double gn = train::clip_grad_norm(model->parameters(), dc.grad_clip);
+    optim->step();
+    train::ema_update(*ema, *model, dc.ema_decay, step);
+    ++step;
+    ++steps_this_run;
+    DecoderStepLog log;
+    log.step = step;
+    log.total = total;
+    log.lr = lr;
+    log.loss = lv;
+    log.grad_norm = gn;
+    log.task = to_string(draw.task) + "@" + fmt::format("{}Hz", kRates[draw.rate]);
+    log.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (step % opt.val_every == 0 || step == total) {
+      log.validation = true;
+      log.val = validate();
+      result.last_val = log.val;
+    }
+    metrics << nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn}, {"task", log.task},
+                               {"seconds", log.seconds}, {"val", log.val}})
+                   .dump()
+            << "\n";
+    metrics.flush();
+    if (on_step) on_step(log);
+    const bool stop = opt.stop_after > 0 && steps_this_run >= opt.stop_after;
+    if (step % cfg.run.checkpoint_every == 0 || step == total || stop) save();
+    if (stop) break;
+  }
+  result.final_step = step;
+  if (step >= total) save_decoder(ema, cfg, opt.out / "decoder.safetensors");
+  return result;
+}
+
+}  // namespace gaia::decoder

@@ -1,0 +1,110 @@
+// The video decoder end to end through the CLI on tiny data: synth -> tokenizer -> decoder train (interrupted and
+// resumed: identical weights to an uninterrupted run) -> decode (MP4, GIF, PNG; --fast) -> eval, and bad inputs.
+#include <nlohmann/json.hpp>
+#include <torch/torch.h>
+
+#include "gaia/core/npy.h"
+#include "gaia/core/safetensors.h"
+#include "gaia/torch/tensor_io.h"
+#include "test_util.h"
+
+using namespace gaia;
+
+namespace {
+
+std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+
+struct DecoderPipeline {
+  test::TempDir dir;
+  fs::path ds, tok;
+  DecoderPipeline() {
+    ds = dir / "ds";
+    tok = dir / "tok";
+    auto r = test::run_gaia("synth --episodes 4 --seconds 3 --size 32x64 --seed 4 --out " + q(ds));
+    if (r.status != 0) throw std::runtime_error(r.output);
+    r = test::run_gaia("tokenizer train " + q(ds) + tiny() + " --steps 10 --out " + q(tok));
+    if (r.status != 0) throw std::runtime_error(r.output);
+  }
+  static DecoderPipeline& get() {
+    static DecoderPipeline p;
+    return p;
+  }
+  std::string tiny() const { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
+  std::string tokenizer() const { return " --tokenizer " + q(tok / "tokenizer.safetensors"); }
+};
+
+}  // namespace
+
+TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
+  auto& p = DecoderPipeline::get();
+  const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --steps 6 --val-every 3";
+  auto r = test::run_gaia(base + " --out " + q(p.dir / "straight"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(base + " --stop-after 3 --out " + q(p.dir / "resumed"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "resumed" / "decoder.safetensors"));
+  r = test::run_gaia(base + " --out " + q(p.dir / "resumed"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("resumed"), std::string::npos) << r.output;
+  SafetensorsFile a(p.dir / "straight" / "decoder.safetensors"), b(p.dir / "resumed" / "decoder.safetensors");
+  ASSERT_EQ(a.names(), b.names());
+  for (const auto& n : a.names())
+    ASSERT_TRUE(torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)))) << n;
+  // metrics.jsonl has a validation entry with a loss.
+  auto lines = read_file(p.dir / "straight" / "metrics.jsonl");
+  EXPECT_NE(lines.find("\"psnr_x0_t0.5\""), std::string::npos);
+
+  // Decode 5 token frames of a rollout-shaped file with 2 futures to 25 Hz: 4 * 5 - 3 = 17 frames.
+  auto tokens = torch::randint(0, 256, {2, 5, 4, 8}, torch::kInt);
+  save_tensors({{"tokens", tokens}}, p.dir / "rollout.safetensors");
+  r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
+                     q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 2" + p.tiny() + " --out " +
+                     q(p.dir / "out" / "video.mp4"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("17 frames at 25 Hz"), std::string::npos) << r.output;
+  for (auto f : {"video.mp4", "video.gif", "video.png"}) EXPECT_GT(fs::file_size(p.dir / "out" / f), 100u) << f;
+  // --fast: the tokenizer's decoder, at the token rate.
+  r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --fast" + p.tiny() + " --out " +
+                     q(p.dir / "fast.mp4"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("5 frames at 6.25 Hz"), std::string::npos) << r.output;
+
+  r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                     " --clips 1 --token-frames 3 --steps 2,1" + p.tiny() + " --out " + q(p.dir / "eval"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
+  EXPECT_EQ(j["frames_25hz"].get<int>(), 9);
+  EXPECT_GT(j["video_decoder"]["2"]["psnr_25hz"].get<double>(), 0);
+  EXPECT_GT(j["tokenizer_decoder"]["psnr_6.25hz"].get<double>(), 0);
+  EXPECT_GT(j["video_decoder"]["1"]["seconds_per_ddim_step"].get<double>(), 0);
+}
+
+TEST(DecoderCli, BadInputsAreClearErrors) {
+  auto& p = DecoderPipeline::get();
+  // A token grid that does not match the tokenizer (tiny: 4x8).
+  npy_write(p.dir / "grid.npy", npy_make<int16_t>(DType::I16, {3, 5, 8}, std::vector<int16_t>(3 * 5 * 8, 1)));
+  auto r = test::run_gaia("decode " + q(p.dir / "grid.npy") + p.tokenizer() + " --fast" + p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("does not match the tokenizer"), std::string::npos) << r.output;
+  // An empty token file.
+  npy_write(p.dir / "empty.npy", npy_make<int16_t>(DType::I16, {0, 4, 8}, std::vector<int16_t>{}));
+  r = test::run_gaia("decode " + q(p.dir / "empty.npy") + p.tokenizer() + " --fast" + p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("empty"), std::string::npos) << r.output;
+  // Token ids outside the codebook.
+  npy_write(p.dir / "big.npy", npy_make<int16_t>(DType::I16, {2, 4, 8}, std::vector<int16_t>(64, 300)));
+  r = test::run_gaia("decode " + q(p.dir / "big.npy") + p.tokenizer() + " --fast" + p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("[0, 256)"), std::string::npos) << r.output;
+  // No decoder and no --fast; a missing tokens file; a decoder file that is not one.
+  r = test::run_gaia("decode " + q(p.dir / "big.npy") + p.tokenizer() + p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.output.find("--decoder"), std::string::npos) << r.output;
+  r = test::run_gaia("decode " + q(p.dir / "nope.npy") + p.tokenizer() + " --fast" + p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.output.find("nope.npy"), std::string::npos) << r.output;
+  npy_write(p.dir / "ok.npy", npy_make<int16_t>(DType::I16, {2, 4, 8}, std::vector<int16_t>(64, 1)));
+  r = test::run_gaia("decode " + q(p.dir / "ok.npy") + p.tokenizer() + " --decoder " + q(p.tok / "tokenizer.safetensors") +
+                     p.tiny() + " --out " + q(p.dir / "x.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("not a gaia video decoder"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "x.mp4"));
+}

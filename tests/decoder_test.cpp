@@ -1,0 +1,339 @@
+// Video decoder (§2.4, §5.2): schedule and v identities, DDIM on an analytic denoiser, task masks, the temporal
+// switch, parameter count against `gaia plan`, EMA, the backward decoding order, upsampling windows, bad inputs.
+#include <torch/torch.h>
+
+#include <map>
+#include <random>
+#include <set>
+
+#include "gaia/core/config.h"
+#include "gaia/decoder/diffusion.h"
+#include "gaia/decoder/sampler.h"
+#include "gaia/decoder/tasks.h"
+#include "gaia/decoder/unet.h"
+#include "gaia/decoder/video.h"
+#include "gaia/plan/plan.h"
+#include "gaia/train/ema.h"
+#include "test_util.h"
+
+using namespace gaia;
+using namespace gaia::decoder;
+
+namespace {
+
+Config tiny() { return Config::load(test::source_dir() / "configs" / "tiny.yaml"); }
+
+// Random weights everywhere, including the zero-initialised output projections, so every path is exercised.
+void randomize(torch::nn::Module& m, uint64_t seed, double std = 0.05) {
+  torch::NoGradGuard ng;
+  torch::manual_seed(seed);
+  for (auto& p : m.parameters()) p.normal_(0, std);
+}
+
+DenoiserInput random_input(const VideoUNet& m, int64_t B, int64_t T, int64_t H, int64_t W, uint64_t seed) {
+  torch::manual_seed(seed);
+  DenoiserInput in;
+  in.x = torch::randn({B, T, 3, H, W});
+  in.context = torch::zeros({B, T});
+  in.tokens = torch::randint(0, m->K + 1, {B, T, H / m->D, W / m->D}, torch::kLong);
+  in.cond_image = torch::randn({B, T, 3, H, W});
+  in.time = torch::rand({B, T});
+  in.rate = torch::zeros({B}, torch::kLong);
+  return in;
+}
+
+}  // namespace
+
+TEST(DecoderDiffusion, ScheduleIsVariancePreservingAndMonotone) {
+  NoiseSchedule s;
+  auto t = torch::linspace(0, 1, 101, torch::kFloat64);
+  auto a = s.alpha(t), g = s.sigma(t);
+  EXPECT_LT((a * a + g * g - 1).abs().max().item<double>(), 1e-12);
+  EXPECT_TRUE((a.slice(0, 1) <= a.slice(0, 0, -1)).all().item<bool>());  // less signal as t grows
+  EXPECT_GT(a[0].item<double>(), 0.999);
+  EXPECT_LT(a[100].item<double>(), 1e-3);
+  // Cosine: alpha(t) = cos(pi t / 2) away from the clipped ends.
+  EXPECT_NEAR(a[50].item<double>(), std::cos(M_PI / 4), 1e-9);
+  // A shift below 1 adds noise at every t.
+  NoiseSchedule shifted{-15, 15, 0.5};
+  EXPECT_LT(shifted.alpha(t)[50].item<double>(), a[50].item<double>());
+}
+
+TEST(DecoderDiffusion, VParameterisationRecoversX0AndEps) {
+  torch::manual_seed(1);
+  NoiseSchedule s;
+  auto x = torch::randn({2, 3, 3, 4, 4}, torch::kFloat64), eps = torch::randn_like(x);
+  auto t = torch::rand({2, 3}, torch::kFloat64);
+  auto a = s.alpha(t).view({2, 3, 1, 1, 1}), g = s.sigma(t).view({2, 3, 1, 1, 1});
+  auto xt = add_noise(x, eps, a, g), v = v_target(x, eps, a, g);
+  EXPECT_LT((x_from_v(xt, v, a, g) - x).abs().max().item<double>(), 1e-12);
+  EXPECT_LT((eps_from_v(xt, v, a, g) - eps).abs().max().item<double>(), 1e-12);
+  // A DDIM step to s = t with the true v returns x_t; to s = 0 it returns x.
+  EXPECT_LT((ddim_step(xt, v, a, g, a, g) - xt).abs().max().item<double>(), 1e-12);
+  auto one = torch::ones_like(a), zero = torch::zeros_like(a);
+  EXPECT_LT((ddim_step(xt, v, a, g, one, zero) - x).abs().max().item<double>(), 1e-12);
+}
+
+TEST(DecoderDiffusion, LossIsPaperWeightedOverPredictedFramesOnly) {
+  auto vp = torch::zeros({1, 2, 3, 2, 2}), vt = torch::zeros({1, 2, 3, 2, 2});
+  vt[0][0].fill_(2.0);   // frame 0: |d| = 2 -> L1 2, L2 4
+  vt[0][1].fill_(10.0);  // frame 1 is context: no loss
+  auto w = torch::tensor({{1.0f, 0.0f}});
+  EXPECT_NEAR(v_loss(vp, vt, w, 0.1, 1.0).item<double>(), 0.1 * 2 + 1.0 * 4, 1e-6);
+}
+
+TEST(DecoderDiffusion, DdimWithAnalyticDenoiserMapsNoiseToTheDataDistribution) {
+  // Data x ~ N(mu, s^2) per dimension. The exact denoiser is E[x | x_t] = mu + a s^2 (x_t - a mu) / (a^2 s^2 + g^2),
+  // and the probability-flow ODE keeps xi = (x_t - a mu) / sqrt(a^2 s^2 + g^2) constant: DDIM with many steps must
+  // map z_1 to mu + s xi(1).
+  NoiseSchedule sch;
+  torch::manual_seed(2);
+  auto mu = torch::randn({64}, torch::kFloat64), sd = torch::rand({64}, torch::kFloat64) * 0.8 + 0.2;
+  auto z1 = torch::randn({64}, torch::kFloat64);
+  auto v_fn = [&](const torch::Tensor& z, double t) {
+    auto tt = torch::tensor({t}, torch::kFloat64);
+    auto a = sch.alpha(tt), g = sch.sigma(tt);
+    auto x_hat = mu + a * sd * sd * (z - a * mu) / (a * a * sd * sd + g * g);
+    auto eps_hat = (z - a * x_hat) / g;
+    return a * eps_hat - g * x_hat;
+  };
+  auto x = ddim_loop(z1.clone(), 1000, sch, v_fn);
+  auto t1 = torch::tensor({1.0}, torch::kFloat64);
+  auto a1 = sch.alpha(t1), g1 = sch.sigma(t1);
+  auto want = mu + sd * (z1 - a1 * mu) / (a1 * a1 * sd * sd + g1 * g1).sqrt();
+  const double err = (x - want).abs().max().item<double>();
+  EXPECT_LT(err, 5e-3);
+  // First-order convergence: 10x fewer steps, ~10x the error (so the test can tell a wrong update from a right one).
+  const double err100 = (ddim_loop(z1.clone(), 100, sch, v_fn) - want).abs().max().item<double>();
+  EXPECT_GT(err100, 5 * err);
+  EXPECT_LT(err100, 20 * err);
+}
+
+TEST(DecoderTasks, MasksForEveryTask) {
+  auto img = task_masks(Task::kImage, 7);
+  EXPECT_FALSE(img.temporal);
+  EXPECT_EQ(std::count(img.context.begin(), img.context.end(), true), 0);
+  EXPECT_EQ(std::count(img.tokens.begin(), img.tokens.end(), true), 7);
+  auto vid = task_masks(Task::kVideo, 7);
+  EXPECT_TRUE(vid.temporal);
+  EXPECT_EQ(std::count(vid.context.begin(), vid.context.end(), true), 0);
+  auto fwd = task_masks(Task::kForward, 7);
+  EXPECT_EQ(fwd.context, (std::vector<bool>{true, true, false, false, false, false, false}));
+  EXPECT_EQ(fwd.tokens, (std::vector<bool>{false, false, true, true, true, true, true}));
+  auto bwd = task_masks(Task::kBackward, 7);
+  EXPECT_EQ(bwd.context, (std::vector<bool>{false, false, false, false, false, true, true}));
+  EXPECT_EQ(bwd.tokens, (std::vector<bool>{true, true, true, true, true, false, false}));
+  auto itp = task_masks(Task::kInterpolate, 7);
+  EXPECT_EQ(itp.context, (std::vector<bool>{true, false, true, false, true, false, true}));
+  EXPECT_EQ(std::count(itp.tokens.begin(), itp.tokens.end(), true), 0);  // guided by image context alone
+}
+
+TEST(DecoderTasks, TasksAreDrawnEquallyAndInterpolationUpsamples) {
+  std::mt19937_64 rng(5);
+  std::map<Task, int> n;
+  const int draws = 20000;
+  for (int i = 0; i < draws; ++i) {
+    auto d = draw_task(rng);
+    ++n[d.task];
+    ASSERT_GE(d.rate, d.task == Task::kInterpolate ? 1 : 0);
+    ASSERT_LE(d.rate, 2);
+  }
+  for (auto& [task, c] : n) EXPECT_NEAR(double(c) / draws, 0.2, 0.015) << to_string(task);
+  EXPECT_EQ(rate_index(12.5), 1);
+  EXPECT_NE(test::error_of([] { rate_index(10); }).find("10"), std::string::npos);
+}
+
+TEST(DecoderUNet, ShapesAndParameterCountMatchThePlan) {
+  for (auto c : {tiny(), Config()}) {
+    VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+    EXPECT_EQ(m->parameter_count(), plan::decoder_params(c).total) << c.name;
+  }
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  auto in = random_input(m, 2, 5, 32, 64, 1);
+  auto v = m->forward(in);
+  EXPECT_EQ(v.sizes(), (std::vector<int64_t>{2, 5, 3, 32, 64}));
+  // Output layer starts at zero (a fresh model predicts v = 0).
+  EXPECT_EQ(v.abs().max().item<float>(), 0.0f);
+}
+
+TEST(DecoderUNet, TemporalSwitchMakesFramesIndependent) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  randomize(*m, 3);
+  m->eval();
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 4);
+  auto in2 = in;
+  in2.x = in.x.clone();
+  in2.x[0][4].normal_();  // change the last frame only
+  in.temporal = in2.temporal = false;
+  auto a = m->forward(in), b = m->forward(in2);
+  EXPECT_LT((a.slice(1, 0, 4) - b.slice(1, 0, 4)).abs().max().item<float>(), 1e-5);  // other frames untouched
+  EXPECT_GT((a[0][4] - b[0][4]).abs().max().item<float>(), 1e-3);
+  // A frame alone gives the same output as in the batch (no cross-frame path at all).
+  auto one = in;
+  one.x = in.x.slice(1, 0, 1);
+  one.context = in.context.slice(1, 0, 1);
+  one.tokens = in.tokens.slice(1, 0, 1);
+  one.cond_image = in.cond_image.slice(1, 0, 1);
+  one.time = in.time.slice(1, 0, 1);
+  EXPECT_LT((m->forward(one)[0][0] - a[0][0]).abs().max().item<float>(), 1e-4);
+  in.temporal = in2.temporal = true;
+  a = m->forward(in);
+  b = m->forward(in2);
+  EXPECT_GT((a[0][0] - b[0][0]).abs().max().item<float>(), 1e-4);  // with temporal layers, frames see each other
+}
+
+TEST(DecoderUNet, TemporalAttentionKnowsOrder) {
+  // With the relative-position bias, reversing time is not a symmetry of the temporal layer.
+  TemporalAttention att(8, 2, 4);
+  randomize(*att, 6, 0.5);
+  torch::NoGradGuard ng;
+  auto x = torch::randn({5, 8, 2, 3});  // B = 1, T = 5
+  auto y = att(x, 5), yr = att(x.flip(0), 5).flip(0);
+  EXPECT_GT((y - yr).abs().max().item<float>(), 1e-4);
+  att->rel_bias.zero_();
+  y = att(x, 5);
+  yr = att(x.flip(0), 5).flip(0);
+  EXPECT_LT((y - yr).abs().max().item<float>(), 1e-5);  // without it, attention is permutation-equivariant
+}
+
+TEST(DecoderTrain, EmaUpdate) {
+  torch::nn::Linear a(2, 2), b(2, 2);
+  torch::NoGradGuard ng;
+  a->weight.fill_(1.0);
+  a->bias.fill_(1.0);
+  b->weight.fill_(3.0);
+  b->bias.fill_(3.0);
+  double d = train::ema_update(*a, *b, 0.999, 1000000);
+  EXPECT_DOUBLE_EQ(d, 0.999);
+  EXPECT_NEAR(a->weight[0][0].item<double>(), 0.999 * 1 + 0.001 * 3, 1e-6);
+  d = train::ema_update(*a, *b, 0.999, 0);  // warm-up: (1 + 0) / (10 + 0)
+  EXPECT_DOUBLE_EQ(d, 0.1);
+  train::ema_copy(*a, *b);
+  EXPECT_EQ(a->bias[1].item<float>(), 3.0f);
+}
+
+TEST(DecoderSchedule, BackwardWindowsDecodeEveryFrameOnceFromTheEnd) {
+  for (int64_t N : {1, 5, 7, 8, 12, 16, 40}) {
+    const int T = 7;
+    auto ws = backward_windows(N, T);
+    std::vector<int> predicted(size_t(N), 0);
+    std::vector<bool> known(size_t(N), false);
+    int64_t prev_start = N;
+    for (size_t k = 0; k < ws.size(); ++k) {
+      const auto& w = ws[k];
+      const int64_t len = int64_t(w.context.size());
+      EXPECT_EQ(len, std::min<int64_t>(N, T));
+      EXPECT_LT(w.start, prev_start);  // moves towards the start
+      prev_start = w.start;
+      int ctx = 0;
+      for (int64_t i = 0; i < len; ++i) {
+        const size_t f = size_t(w.start + i);
+        if (w.context[size_t(i)]) {
+          EXPECT_TRUE(known[f]) << "context frame " << f << " not decoded yet";
+          ++ctx;
+        } else {
+          ++predicted[f];
+        }
+      }
+      if (k == 0) {
+        EXPECT_EQ(w.start + len, N);  // the last T' frames first
+      } else {
+        EXPECT_GE(ctx, kOverlapFrames);  // at least 2 overlapping frames
+        if (w.start > 0) {
+          EXPECT_EQ(ctx, kOverlapFrames);
+        }
+      }
+      for (int64_t i = 0; i < len; ++i) known[size_t(w.start + i)] = true;
+    }
+    for (int p : predicted) EXPECT_EQ(p, 1) << "N = " << N;
+  }
+}
+
+TEST(DecoderSchedule, UpsampleWindowsFillEveryOddFrame) {
+  for (int64_t M : {3, 7, 13, 15, 31, 61}) {
+    auto ws = upsample_windows(M, 7);
+    std::vector<int> predicted(size_t(M), 0);
+    for (const auto& w : ws) {
+      EXPECT_EQ(w.start % 2, 0);
+      EXPECT_TRUE(w.context.front());
+      EXPECT_TRUE(w.context.back());  // starts and ends on a known frame
+      for (size_t i = 0; i < w.context.size(); ++i) {
+        EXPECT_EQ(w.context[i], (w.start + int64_t(i)) % 2 == 0);
+        if (!w.context[i]) ++predicted[size_t(w.start) + i];
+      }
+    }
+    for (int64_t f = 0; f < M; ++f) EXPECT_EQ(predicted[size_t(f)], f % 2) << "M = " << M << " frame " << f;
+  }
+  EXPECT_NE(test::error_of([] { upsample_windows(9, 6); }).find("odd"), std::string::npos);
+}
+
+TEST(DecoderVideo, DecodesToTwentyFiveHertzKeepingKnownFrames) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  randomize(*m, 7);
+  m->eval();
+  NoiseSchedule sch;
+  const int64_t N = 7;
+  auto tokens = torch::randint(0, m->K, {2, N, 4, 8}, torch::kLong);
+  auto cond = torch::rand({2, N, 3, 32, 64}) * 2 - 1;
+  DecodeOptions o;
+  o.sample.steps = 2;
+  o.out_fps = 12.5;
+  int last = 0, total = 0;
+  auto v = decode_video(m, sch, tokens, cond, o, [&](int d, int t) { last = d, total = t; });
+  EXPECT_EQ(v.sizes(), (std::vector<int64_t>{2, 2 * N - 1, 3, 32, 64}));
+  EXPECT_EQ(last, total);
+  EXPECT_EQ(total, count_windows(N, c.decoder.frames, 6.25, 12.5));
+  EXPECT_LE(v.abs().max().item<float>(), 1.0f);
+  // Upsampling keeps the frames it was given exactly.
+  auto up = upsample_video(m, sch, v, 2, o.sample);
+  EXPECT_EQ(up.size(1), 2 * v.size(1) - 1);
+  EXPECT_TRUE(torch::equal(up.slice(1, 0, up.size(1), 2), v));
+  // Same seed, same video.
+  auto v2 = decode_video(m, sch, tokens, cond, o);
+  EXPECT_TRUE(torch::equal(v, v2)) << (v - v2).abs().max().item<float>();
+}
+
+TEST(DecoderVideo, BadInputsAreClearErrors) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  NoiseSchedule sch;
+  DecodeOptions o;
+  o.sample.steps = 1;
+  auto cond = torch::zeros({1, 3, 3, 32, 64});
+  EXPECT_NE(test::error_of([&] { decode_video(m, sch, torch::zeros({1, 3, 4, 8}, torch::kLong).fill_(m->K), cond, o); })
+                .find("token ids"),
+            std::string::npos);
+  EXPECT_NE(test::error_of([&] { decode_video(m, sch, torch::zeros({1, 0, 4, 8}, torch::kLong), cond, o); })
+                .find("nothing to decode"),
+            std::string::npos);
+  // A 5x8 grid is not the 32x64 frames the decoded images have.
+  EXPECT_NE(test::error_of([&] { decode_video(m, sch, torch::zeros({1, 3, 5, 8}, torch::kLong), cond, o); }).find("decoded frames"),
+            std::string::npos);
+  o.out_fps = 20;
+  EXPECT_NE(test::error_of([&] { decode_video(m, sch, torch::zeros({1, 3, 4, 8}, torch::kLong), cond, o); }).find("20"),
+            std::string::npos);
+}
+
+TEST(DecoderVideo, ForwardAndWindowAreRepeatable) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  randomize(*m, 7);
+  m->eval();
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 4);
+  EXPECT_TRUE(torch::equal(m->forward(in), m->forward(in)));
+  WindowInput w;
+  w.frames = in.x;
+  w.context = in.context;
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  w.cond_image = in.cond_image;
+  SampleOptions o;
+  o.steps = 2;
+  NoiseSchedule sch;
+  auto a = sample_window(m, sch, w, o), b = sample_window(m, sch, w, o);
+  EXPECT_TRUE(torch::equal(a, b)) << (a - b).abs().max().item<float>();
+}
