@@ -130,6 +130,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("decoder.channel_mult", &v.channel_mult));
   f.push_back(field("decoder.res_blocks", &v.res_blocks));
   f.push_back(field("decoder.attn_levels", &v.attn_levels));
+  f.push_back(field("decoder.temporal_levels", &v.temporal_levels));
   f.push_back(field("decoder.heads", &v.heads));
   f.push_back(field("decoder.token_embed_dim", &v.token_embed_dim));
   f.push_back(field("decoder.cond_image", &v.cond_image));

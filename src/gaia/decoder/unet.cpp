@@ -106,9 +106,12 @@ VideoUNetImpl::VideoUNetImpl(const DecoderConfig& c, int64_t K_, int64_t D_) : c
   const int64_t ch = c.channels, emb = 4 * ch, E = c.token_embed_dim;
   const int64_t max_offset = c.frames - 1;  // relative offsets within one window of T' frames
   auto has_attn = [&](int level) { return std::find(c.attn_levels.begin(), c.attn_levels.end(), level) != c.attn_levels.end(); };
+  auto has_temporal = [&](int level) {
+    return std::find(c.temporal_levels.begin(), c.temporal_levels.end(), level) != c.temporal_levels.end();
+  };
   auto layer = [&](int64_t cin, int64_t cout, int level) {
     UNetLayer l(cin, cout, emb, has_attn(level), c.heads);
-    l->temporal = l->register_module("temporal", TemporalAttention(cout, c.heads, max_offset));
+    if (has_temporal(level)) l->temporal = l->register_module("temporal", TemporalAttention(cout, c.heads, max_offset));
     return l;
   };
   token_embedding = register_module("token_embedding", torch::nn::Embedding(K + 1, E));

@@ -97,15 +97,16 @@ ParamCount decoder_params(const Config& cfg) {
   const auto& v = cfg.decoder;
   const int L = static_cast<int>(v.channel_mult.size());
   const int64_t ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
-  auto has_attn = [&](int level) {
-    for (int a : v.attn_levels) if (a == level) return true;
+  auto in = [](const std::vector<int>& levels, int level) {
+    for (int a : levels) if (a == level) return true;
     return false;
   };
-  // Factorised attention (Ho et al. 2022): temporal attention across frames in every layer (LayerNorm, qkv, proj,
-  // a relative-position bias of 2T'-1 entries per head), spatial attention within a frame at attn_levels.
+  // Factorised attention (Ho et al. 2022): temporal attention across frames at temporal_levels (LayerNorm, qkv,
+  // proj, a relative-position bias of 2T'-1 entries per head), spatial attention within a frame at attn_levels.
   auto temporal = [&](int64_t c) { return layer_norm(c) + linear(c, 3 * c) + linear(c, c) + int64_t(2 * v.frames - 1) * v.heads; };
   auto layer = [&](int64_t cin, int64_t cout, int level) {
-    return res_block(cin, cout, emb) + (has_attn(level) ? attention(cout) : 0) + temporal(cout);
+    return res_block(cin, cout, emb) + (in(v.attn_levels, level) ? attention(cout) : 0) +
+           (in(v.temporal_levels, level) ? temporal(cout) : 0);
   };
   int64_t p = 0, token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the "no token" embedding
   p += token_embedding;
