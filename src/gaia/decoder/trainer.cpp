@@ -16,6 +16,7 @@
 #include "gaia/train/ema.h"
 #include "gaia/train/optim.h"
 #include "gaia/train/schedule.h"
+#include "gaia/train/step_loop.h"
 
 namespace gaia::decoder {
 
@@ -152,7 +153,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
   fs::create_directories(opt.out);
-  std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
+  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", optim.get()}},
                            {step, {{"config", cfg.name}}});
@@ -184,7 +185,6 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   };
 
   model->train();
-  int steps_this_run = 0;
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
     std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
@@ -208,7 +208,6 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     optim->step();
     train::ema_update(*ema, *model, dc.ema_decay, step);
     ++step;
-    ++steps_this_run;
     DecoderStepLog log;
     log.step = step;
     log.total = total;
@@ -217,20 +216,15 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     log.grad_norm = gn;
     log.task = to_string(draw.task) + "@" + fmt::format("{}Hz", kRates[draw.rate]);
     log.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (step % opt.val_every == 0 || step == total) {
+    if (loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
     }
-    metrics << nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn}, {"task", log.task},
-                               {"seconds", log.seconds}, {"val", log.val}})
-                   .dump()
-            << "\n";
-    metrics.flush();
+    const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn}, {"task", log.task},
+                               {"seconds", log.seconds}, {"val", log.val}});
     if (on_step) on_step(log);
-    const bool stop = opt.stop_after > 0 && steps_this_run >= opt.stop_after;
-    if (step % cfg.run.checkpoint_every == 0 || step == total || stop) save();
-    if (stop) break;
+    if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
   if (step >= total) save_decoder(ema, cfg, opt.out / "decoder.safetensors");

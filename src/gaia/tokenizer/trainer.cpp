@@ -18,6 +18,7 @@
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
 #include "gaia/train/schedule.h"
+#include "gaia/train/step_loop.h"
 
 namespace gaia::tokenizer {
 
@@ -113,7 +114,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     note("initialised from " + opt.init.string());
   }
   fs::create_directories(opt.out);
-  std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
+  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
 
   auto save = [&]() {
     nlohmann::json extra = {{"usage", usage}, {"config", cfg.name}};
@@ -154,7 +155,6 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   model->train();
   disc->train();
   std::vector<torch::Tensor> recent_codes;
-  int steps_this_run = 0;
   while (step < total) {
     std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
     torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
@@ -224,7 +224,6 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       for (int64_t i = 0; i < idx.size(0); ++i) usage[static_cast<size_t>(acc[i])]++;
     }
     ++step;
-    ++steps_this_run;
     if (opt.restart_every > 0 && step % opt.restart_every == 0 && step < total) {
       torch::NoGradGuard ng;
       auto ze = F::normalize(model->quantizer->proj_in(model->encoder->forward(x).permute({0, 2, 3, 1}).reshape({-1, tc.z_channels})),
@@ -241,17 +240,14 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     log.total = total;
     log.lr = lr;
     log.losses = terms;
-    if (step % opt.val_every == 0 || step == total) {
+    if (loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
     }
-    metrics << nlohmann::json({{"step", step}, {"lr", lr}, {"losses", terms}, {"val", log.val}}).dump() << "\n";
-    metrics.flush();
+    const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"losses", terms}, {"val", log.val}});
     if (on_step) on_step(log);
-    bool stop = opt.stop_after > 0 && steps_this_run >= opt.stop_after;
-    if (step % cfg.run.checkpoint_every == 0 || step == total || stop) save();
-    if (stop) break;
+    if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
   if (step >= total) save_tokenizer(model, cfg, opt.out / "tokenizer.safetensors");

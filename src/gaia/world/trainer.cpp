@@ -9,6 +9,7 @@
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
 #include "gaia/train/schedule.h"
+#include "gaia/train/step_loop.h"
 #include "gaia/world/evaluate.h"
 #include "gaia/world/io.h"
 
@@ -60,7 +61,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
   fs::create_directories(opt.out);
-  std::ofstream metrics(opt.out / "metrics.jsonl", std::ios::app);
+  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}},
                            {step, {{"config", cfg.name}}});
@@ -83,7 +84,6 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
 
   const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
   model->train();
-  int steps_this_run = 0;
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
     auto batch = training_batch(ds, sampler, ds.has_captions() ? &vocab : nullptr, wc, cfg.run.seed, step).to(dev);
@@ -98,7 +98,6 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     const double gn = train::clip_grad_norm(model->parameters(), wc.grad_clip);
     optim->step();
     ++step;
-    ++steps_this_run;
     WorldStepLog log;
     log.step = step;
     log.total = total;
@@ -107,20 +106,15 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     log.grad_norm = gn;
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    if (step % opt.val_every == 0 || step == total) {
+    if (loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
     }
-    metrics << nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
-                               {"tokens_per_s", log.tokens_per_s}, {"val", log.val}})
-                   .dump()
-            << "\n";
-    metrics.flush();
+    const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
+                               {"tokens_per_s", log.tokens_per_s}, {"val", log.val}});
     if (on_step) on_step(log);
-    const bool stop = opt.stop_after > 0 && steps_this_run >= opt.stop_after;
-    if (step % cfg.run.checkpoint_every == 0 || step == total || stop) save();
-    if (stop) break;
+    if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
   if (step >= total) save_world(model, info, opt.out / "world.safetensors");
