@@ -18,6 +18,9 @@ struct CodeStats {
 };
 CodeStats code_stats(const std::vector<int64_t>& counts);  // counts[k] = occurrences of code k
 
+// Spearman rank correlation (ties get their average rank); 0 when either side is constant.
+double spearman(const std::vector<double>& a, const std::vector<double>& b);
+
 // H W 3 8 / (n log2 K): the paper's bit compression of a tokenizer (§4.1: ~470).
 double bit_compression(int height, int width, int tokens, int codebook_size);
 

@@ -1,0 +1,79 @@
+// gaia probe train|eval: the evaluation probes (dynamics: speed and curvature from two frames; scene: weather, time
+// of day, light state, lead vehicle close) on procedural-world data with ground-truth labels.
+#include <cstdio>
+
+#include "common.h"
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/data/geofence.h"
+#include "gaia/probe/trainer.h"
+#include "gaia/torch/tensor_io.h"
+
+namespace gaia::app {
+
+void register_probe(CLI::App& app) {
+  auto* probe = app.add_subcommand("probe", "evaluation probes: train, eval (dynamics | scene)");
+  probe->require_subcommand(1);
+  {
+    auto* cmd = probe->add_subcommand("train", "train a probe on a gaia synth dataset (resumes from OUT/checkpoint)");
+    auto flags = std::make_shared<SharedFlags>();
+    auto o = std::make_shared<probe::ProbeTrainOptions>();
+    auto kind = std::make_shared<std::string>(), dataset = std::make_shared<std::string>();
+    cmd->add_option("KIND", *kind, "dynamics | scene")->required();
+    cmd->add_option("DATASET", *dataset, "episode dataset with labels (gaia synth)")->required();
+    cmd->add_option("--steps", o->steps, "training steps");
+    cmd->add_option("--batch", o->batch, "examples per step");
+    cmd->add_option("--val-every", o->val_every, "steps between validations");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      apply_threads(c);
+      if (flags->out.empty()) fail("gaia probe train: --out RUN_DIR is required");
+      probe::ProbeTrainOptions opt = *o;
+      opt.kind = probe::parse_kind(*kind);
+      opt.dataset = *dataset;
+      opt.out = flags->out;
+      if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch must be >= 1");
+      std::unique_ptr<ProgressBar> bar;
+      auto r = probe::train_probe(
+          c, opt,
+          [&](int step, int total, double loss, const nlohmann::json&) {
+            if (!bar) bar = std::make_unique<ProgressBar>(total, "probe " + *kind);
+            bar->update(step, fmt::format("loss {:.4f}", loss));
+          },
+          [](const std::string& n) { std::fprintf(stderr, "probe: %s\n", n.c_str()); });
+      if (bar) bar->finish();
+      std::printf("probe %s: step %d%s; held-out %s\n", kind->c_str(), r.final_step,
+                  r.weights.empty() ? " (checkpointed)" : (" -> " + r.weights.string()).c_str(), r.last_val.dump().c_str());
+    });
+  }
+  {
+    auto* cmd = probe->add_subcommand("eval", "score a probe on the held-out episodes of a labelled dataset");
+    auto flags = std::make_shared<SharedFlags>();
+    auto weights = std::make_shared<std::string>(), dataset = std::make_shared<std::string>();
+    auto n = std::make_shared<int>(512);
+    cmd->add_option("WEIGHTS", *weights, "probe weights (probe-KIND.safetensors)")->required();
+    cmd->add_option("DATASET", *dataset, "episode dataset with labels")->required();
+    cmd->add_option("--examples", *n, "held-out examples (evenly spaced)");
+    add_shared_flags(cmd, flags.get(), "output directory (probe_eval.json); default: print only");
+    cmd->callback([=] {
+      Config c = resolve_config(*flags);
+      apply_threads(c);
+      auto dev = parse_device(c.run.device);
+      auto net = probe::load_probe(*weights, dev);
+      data::Dataset ds(*dataset);
+      const int stride = net->kind == probe::ProbeKind::kDynamics ? probe::dynamics_stride(c) : 0;
+      auto set = probe::held_out_examples(ds, c.run.seed, stride, std::max(1, *n));
+      auto j = probe::score(net->kind, probe::predict(net, set, stride, dev),
+                            probe::targets(net->kind, set.episodes, set.examples, stride));
+      if (!flags->out.empty()) {
+        fs::create_directories(flags->out);
+        write_file_atomic(fs::path(flags->out) / "probe_eval.json", j.dump(2) + "\n");
+      }
+      std::printf("%s\n", j.dump(2).c_str());
+    });
+  }
+}
+
+}  // namespace gaia::app

@@ -1,0 +1,48 @@
+#pragma once
+// Evaluation probes (what the paper shows in pictures, measured): small CNNs trained on procedural-world frames,
+// whose read-back of generated video is compared with what was asked for.
+//   dynamics  two frames 0.16 s apart (one step at 6.25 Hz) -> ego speed and curvature between them
+//   scene     one frame -> weather, time of day, traffic-light state, whether a lead vehicle is close
+// Their penultimate features give a Frechet distance between sets of clips ("FD-probe"; it is not FVD: the
+// features come from our probes trained on our procedural world, not from an I3D network trained on Kinetics).
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+namespace gaia::probe {
+
+enum class ProbeKind { kDynamics, kScene };
+ProbeKind parse_kind(const std::string& s);  // "dynamics" | "scene"
+std::string to_string(ProbeKind k);
+
+// Class names of the scene attributes (the synth labels' vocabularies).
+const std::vector<std::string>& weather_classes();      // clear, overcast, rain, fog, snow
+const std::vector<std::string>& time_classes();         // day, dusk, night
+const std::vector<std::string>& light_classes();        // none, green, amber, red
+int class_index(const std::vector<std::string>& classes, const std::string& name);  // -1 if unknown
+
+// x [B, 3 * frames, H, W] in [-1, 1] -> features [B, width] (global average of the last conv block).
+struct ProbeNetImpl : torch::nn::Module {
+  ProbeNetImpl(ProbeKind kind, int64_t width = 128);
+  torch::Tensor features(const torch::Tensor& x);
+  // dynamics: [B, 2] normalised (speed / kSpeedScale, curvature / kCurvatureScale);
+  // scene: logits concatenated [B, 5 + 3 + 4 + 2] (weather | time | light | lead close).
+  torch::Tensor forward(const torch::Tensor& x) { return head(features(x)); }
+  int64_t in_frames() const { return kind == ProbeKind::kDynamics ? 2 : 1; }
+
+  ProbeKind kind;
+  torch::nn::Sequential body{nullptr};
+  torch::nn::Linear head{nullptr};
+};
+TORCH_MODULE(ProbeNet);
+
+constexpr int64_t kSceneLogits = 5 + 3 + 4 + 2;
+// Splits scene logits into the four heads.
+std::vector<torch::Tensor> split_scene_logits(const torch::Tensor& logits);
+
+// Frechet distance between two sets of feature vectors [N, F] and [M, F] (Gaussians fitted to each):
+// |mu1 - mu2|^2 + tr(S1 + S2 - 2 (S1 S2)^(1/2)), computed in float64 with a symmetric square root.
+double frechet_distance(const torch::Tensor& a, const torch::Tensor& b);
+
+}  // namespace gaia::probe

@@ -1,0 +1,250 @@
+#include "gaia/probe/trainer.h"
+
+#include <cmath>
+#include <random>
+
+#include "gaia/core/error.h"
+#include "gaia/data/geofence.h"
+#include "gaia/eval/metrics.h"
+#include "gaia/tokenizer/autoencoder.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/train/checkpoint.h"
+#include "gaia/train/optim.h"
+#include "gaia/train/schedule.h"
+#include "gaia/train/step_loop.h"
+#include "gaia/world/batch.h"
+
+namespace gaia::probe {
+
+namespace F = torch::nn::functional;
+
+torch::Tensor probe_input(const std::vector<cv::Mat>& frames) {
+  std::vector<torch::Tensor> xs;
+  for (const auto& f : frames) {
+    cv::Mat c = f.isContinuous() ? f : f.clone();
+    xs.push_back(tokenizer::image_to_tensor(c.data, c.rows, c.cols));
+  }
+  return torch::cat(xs, 0);
+}
+
+int dynamics_stride(const Config& c) { return std::max(1, int(std::lround(c.data.native_fps / c.data.world_fps))); }
+
+torch::Tensor inputs(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
+                     const std::vector<Example>& ex, int stride) {
+  std::vector<torch::Tensor> xs;
+  for (const auto& e : ex) {
+    std::vector<cv::Mat> f{eps.at(e.episode)->frame_bgr(e.frame)};
+    if (kind == ProbeKind::kDynamics) f.push_back(eps[e.episode]->frame_bgr(e.frame + stride));
+    xs.push_back(probe_input(f));
+  }
+  return torch::stack(xs);
+}
+
+torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
+                      const std::vector<Example>& ex, int stride) {
+  if (kind == ProbeKind::kDynamics) {
+    std::vector<float> v;
+    for (const auto& e : ex) {
+      const auto& ep = *eps.at(e.episode);
+      double s = 0, c = 0;
+      for (int64_t i = e.frame; i <= e.frame + stride; ++i) s += ep.speed(i), c += ep.curvature(i);
+      s /= stride + 1;
+      c /= stride + 1;
+      if (!std::isfinite(s) || !std::isfinite(c))
+        fail("{}: frame {} has no speed/curvature (the dynamics probe needs them)", ep.dir().string(), e.frame);
+      v.push_back(float(s / world::kSpeedScale));
+      v.push_back(float(c / world::kCurvatureScale));
+    }
+    return torch::tensor(v).view({int64_t(ex.size()), 2});
+  }
+  std::vector<int64_t> v;
+  for (const auto& e : ex) {
+    const auto& ep = *eps.at(e.episode);
+    if (!ep.has_labels()) fail("{}: no labels.jsonl (the scene probe trains on gaia synth data)", ep.dir().string());
+    const auto& j = ep.labels(e.frame);
+    auto cls = [&](const std::vector<std::string>& classes, const char* key) {
+      int k = class_index(classes, j.value(key, std::string()));
+      if (k < 0) fail("{}: frame {}: label '{}' has an unknown value", ep.dir().string(), e.frame, key);
+      return int64_t(k);
+    };
+    v.push_back(cls(weather_classes(), "weather"));
+    v.push_back(cls(time_classes(), "time_of_day"));
+    v.push_back(cls(light_classes(), "light_state"));
+    v.push_back(j.value("lead_close", false) ? 1 : 0);
+  }
+  return torch::tensor(v, torch::kLong).view({int64_t(ex.size()), 4});
+}
+
+ExampleSet example_set(const data::Dataset& ds, const std::vector<std::string>& ids, int stride, int n) {
+  ExampleSet s;
+  std::vector<Example> all;
+  for (size_t e : data::episode_indices(ds, ids)) {
+    s.episodes.push_back(std::make_unique<data::Episode>(ds.episode(e)));
+    for (int64_t i = 0; i + stride < s.episodes.back()->size(); ++i) all.push_back({s.episodes.size() - 1, i});
+  }
+  if (n <= 0 || size_t(n) >= all.size()) {
+    s.examples = std::move(all);
+  } else {
+    for (size_t k = 0; k < size_t(n); ++k) s.examples.push_back(all[k * all.size() / size_t(n)]);
+  }
+  return s;
+}
+
+ExampleSet held_out_examples(const data::Dataset& ds, uint64_t seed, int stride, int n) {
+  auto split = data::load_or_default_split(ds, 0.1, seed);
+  auto ids = split.val_geofence;
+  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  if (ids.empty()) ids = ds.ids();
+  return example_set(ds, ids, stride, n);
+}
+
+torch::Tensor predict(ProbeNet& net, const ExampleSet& s, int stride, const torch::Device& dev) {
+  torch::NoGradGuard ng;
+  const bool was_training = net->is_training();
+  net->eval();
+  std::vector<torch::Tensor> preds;
+  for (size_t i = 0; i < s.examples.size(); i += 64) {
+    std::vector<Example> part(s.examples.begin() + long(i), s.examples.begin() + long(std::min(s.examples.size(), i + 64)));
+    preds.push_back(net->forward(inputs(net->kind, s.episodes, part, stride).to(dev)).cpu());
+  }
+  net->train(was_training);
+  return torch::cat(preds);
+}
+
+namespace {
+
+torch::Tensor loss_of(ProbeKind kind, const torch::Tensor& out, const torch::Tensor& y) {
+  if (kind == ProbeKind::kDynamics) return F::mse_loss(out, y);
+  auto heads = split_scene_logits(out);
+  torch::Tensor l = torch::zeros({}, out.options());
+  for (size_t k = 0; k < heads.size(); ++k) l = l + F::cross_entropy(heads[k], y.select(1, int64_t(k)));
+  return l;
+}
+
+std::vector<double> col(const torch::Tensor& t, int64_t c, double scale) {
+  auto v = t.select(1, c).to(torch::kFloat64).contiguous();
+  std::vector<double> out(v.data_ptr<double>(), v.data_ptr<double>() + v.numel());
+  for (auto& x : out) x *= scale;
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& y) {
+  nlohmann::json j;
+  j["examples"] = pred.size(0);
+  if (kind == ProbeKind::kDynamics) {
+    auto ps = col(pred, 0, world::kSpeedScale), ys = col(y, 0, world::kSpeedScale);
+    auto pc = col(pred, 1, world::kCurvatureScale), yc = col(y, 1, world::kCurvatureScale);
+    double mae_s = 0, mae_c = 0;
+    int steer = 0, right = 0;
+    for (size_t i = 0; i < ps.size(); ++i) {
+      mae_s += std::abs(ps[i] - ys[i]) / double(ps.size());
+      mae_c += std::abs(pc[i] - yc[i]) / double(ps.size());
+      if (std::abs(yc[i]) >= 0.002) {
+        ++steer;
+        right += (pc[i] > 0) == (yc[i] > 0);
+      }
+    }
+    j["speed_mae_mps"] = mae_s;
+    j["curvature_mae_per_m"] = mae_c;
+    j["speed_spearman"] = eval::spearman(ps, ys);
+    j["curvature_spearman"] = eval::spearman(pc, yc);
+    j["steering_sign_accuracy"] = steer ? double(right) / steer : 0.0;
+    j["steering_examples"] = steer;
+    return j;
+  }
+  auto heads = split_scene_logits(pred);
+  const char* names[4] = {"weather_accuracy", "time_of_day_accuracy", "light_state_accuracy", "lead_close_accuracy"};
+  for (size_t k = 0; k < 4; ++k)
+    j[names[k]] = heads[k].argmax(1).eq(y.select(1, int64_t(k))).to(torch::kFloat64).mean().item<double>();
+  return j;
+}
+
+ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
+                             const std::function<void(int, int, double, const nlohmann::json&)>& on_step,
+                             const std::function<void(const std::string&)>& on_note) {
+  const torch::Device dev = parse_device(cfg.run.device);
+  ProbeTrainResult result;
+  data::Dataset ds(opt.dataset);
+  auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  auto val_ids = split.val_geofence;
+  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  const int stride = opt.kind == ProbeKind::kDynamics ? dynamics_stride(cfg) : 0;
+  auto train = example_set(ds, split.train, stride, 0);
+  auto val = example_set(ds, val_ids, stride, opt.val_examples);
+  const auto& train_eps = train.episodes;
+  const auto& train_ex = train.examples;
+  if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
+  if (val.examples.empty() && on_note) on_note("no held-out episodes: validation skipped");
+
+  torch::manual_seed(cfg.run.seed);
+  ProbeNet net(opt.kind);
+  net->to(dev);
+  auto optim = train::make_adamw(net->parameters(), opt.lr, 1e-4, 0.9, 0.999);
+  train::WarmupCosine sched{opt.lr, opt.lr / 20, 50, opt.steps};
+  const fs::path ckpt = opt.out / "checkpoint";
+  int step = 0;
+  if (train::has_checkpoint(ckpt)) {
+    step = train::load_checkpoint(ckpt, {{"probe", net.ptr().get()}}, {{"probe", optim.get()}}).step;
+    result.resumed = true;
+    if (on_note) on_note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+  }
+  fs::create_directories(opt.out);
+  train::StepLoop loop(opt.out / "metrics.jsonl", opt.steps, cfg.run.checkpoint_every, opt.stop_after);
+  auto save = [&] { train::save_checkpoint(ckpt, {{"probe", net.ptr().get()}}, {{"probe", optim.get()}}, {step, {}}); };
+  auto validate = [&] {
+    nlohmann::json v;
+    if (val.examples.empty()) return v;
+    return score(opt.kind, predict(net, val, stride, dev), targets(opt.kind, val.episodes, val.examples, stride));
+  };
+  net->train();
+  while (step < opt.steps) {
+    std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
+    std::uniform_int_distribution<size_t> pick(0, train_ex.size() - 1);
+    std::vector<Example> b;
+    for (int i = 0; i < opt.batch; ++i) b.push_back(train_ex[pick(rng)]);
+    auto x = inputs(opt.kind, train_eps, b, stride).to(dev);
+    // Flip augmentation would swap left and right, which is the label of the dynamics probe: none here.
+    auto y = targets(opt.kind, train_eps, b, stride).to(dev);
+    const double lr = sched(step);
+    train::set_lr(*optim, lr);
+    auto loss = loss_of(opt.kind, net->forward(x), y);
+    const double lv = loss.item<double>();
+    if (!std::isfinite(lv)) fail("{} probe training diverged at step {}", to_string(opt.kind), step);
+    optim->zero_grad();
+    loss.backward();
+    optim->step();
+    ++step;
+    nlohmann::json val;
+    if (loop.validate_now(step, opt.val_every)) result.last_val = val = validate();
+    if (on_step) on_step(step, opt.steps, lv, val);
+    if (loop.end_step(step, {{"step", step}, {"lr", lr}, {"loss", lv}, {"val", val}}, save)) break;
+  }
+  result.final_step = step;
+  if (step >= opt.steps) {
+    result.weights = opt.out / ("probe-" + to_string(opt.kind) + ".safetensors");
+    save_module(*net, result.weights,
+                {{"gaia.component", "probe"}, {"gaia.probe.kind", to_string(opt.kind)},
+                 {"gaia.probe.val", result.last_val.dump()}});
+  }
+  return result;
+}
+
+ProbeNet load_probe(const fs::path& path, const torch::Device& device) {
+  ProbeKind kind;
+  {
+    SafetensorsFile f(path);
+    auto md = f.metadata();
+    if (md["gaia.component"] != "probe" || !md.count("gaia.probe.kind"))
+      fail("{}: not a gaia probe weights file (no probe metadata)", path.string());
+    kind = parse_kind(md["gaia.probe.kind"]);
+  }
+  ProbeNet net(kind);
+  load_module(*net, path);
+  net->to(device);
+  net->eval();
+  return net;
+}
+
+}  // namespace gaia::probe
