@@ -27,7 +27,10 @@ fs::path make_video(const fs::path& dir, int n) {
 }  // namespace
 
 TEST(Cli, HelpForEverySubcommand) {
-  for (std::string sub : {"", "demo", "plan", "ingest", "data", "data stats", "data split", "data info"}) {
+  for (std::string sub : {"", "demo", "plan", "ingest", "data", "data stats", "data split", "data info", "synth",
+                          "synth replay", "tokenizer", "tokenizer train", "tokenizer eval", "tokenize", "world",
+                          "world train", "world eval", "generate", "decoder", "decoder train", "decoder eval", "decode",
+                          "probe", "probe train", "probe eval"}) {
     auto r = test::run_gaia(sub + " --help");
     EXPECT_EQ(r.status, 0) << sub << r.output;
     EXPECT_NE(r.output.find("Usage"), std::string::npos) << sub;
