@@ -30,7 +30,7 @@ TEST(Cli, HelpForEverySubcommand) {
   for (std::string sub : {"", "demo", "plan", "ingest", "data", "data stats", "data split", "data info", "synth",
                           "synth replay", "tokenizer", "tokenizer train", "tokenizer eval", "tokenize", "world",
                           "world train", "world eval", "generate", "decoder", "decoder train", "decoder eval", "decode",
-                          "probe", "probe train", "probe eval"}) {
+                          "probe", "probe train", "probe eval", "convert"}) {
     auto r = test::run_gaia(sub + " --help");
     EXPECT_EQ(r.status, 0) << sub << r.output;
     EXPECT_NE(r.output.find("Usage"), std::string::npos) << sub;
@@ -108,4 +108,17 @@ TEST(Cli, DataStatsSplitAndDemo) {
   auto demo = test::run_gaia("demo --video '" + video.string() + "' --out '" + (dir / "demo").string() + "'");
   EXPECT_EQ(demo.status, 0) << demo.output;
   EXPECT_NE(demo.output.find("60 frames"), std::string::npos) << demo.output;
+}
+
+TEST(Cli, ConvertToHalf) {
+  test::TempDir d;
+  auto src = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
+  auto r = test::run_gaia("convert '" + src.string() + "' --out '" + (d / "x.safetensors").string() + "'");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--half"), std::string::npos) << r.output;
+  r = test::run_gaia("convert '" + src.string() + "' --half --out '" + (d / "half.safetensors").string() + "'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  // The output path is used exactly as given (a CLI11 required-flag bug once corrupted it).
+  EXPECT_TRUE(fs::exists(d / "half.safetensors")) << r.output;
+  EXPECT_LT(fs::file_size(d / "half.safetensors"), fs::file_size(src));
 }

@@ -184,3 +184,30 @@ TEST(PeerFixtures, TorchSafetensorsReadExactly) {
   EXPECT_EQ(c.dtype, DType::I64);
   EXPECT_EQ(reinterpret_cast<const int64_t*>(c.data)[4], 4000);
 }
+
+TEST(Safetensors, ConvertToHalfKeepsNamesMetadataAndOtherDtypes) {
+  test::TempDir d;
+  SafetensorsWriter w;
+  std::vector<float> f{0.1f, -2.5f, 1000.0f, 3.14159f};
+  std::vector<int64_t> i{1, -2, 3};
+  w.add_f32("w", {2, 2}, f);
+  w.add("ids", DType::I64, {3}, i.data(), i.size() * sizeof(int64_t));
+  w.set_metadata("gaia.component", "probe");
+  w.write(d / "a.safetensors");
+  const double err = convert_to_half(d / "a.safetensors", d / "a.safetensors");  // in place
+  SafetensorsFile r(d / "a.safetensors");
+  EXPECT_EQ(r.get("w").dtype, DType::F16);
+  EXPECT_EQ(r.get("ids").dtype, DType::I64);
+  EXPECT_EQ(r.metadata().at("gaia.component"), "probe");
+  auto back = r.to_float("w");
+  for (size_t k = 0; k < f.size(); ++k) EXPECT_NEAR(back[k], f[k], std::abs(f[k]) * 1e-3);
+  EXPECT_GT(err, 0.0);
+  EXPECT_LT(err, 0.5);  // 1000 rounds to a multiple of 0.5 in half precision
+  // A NaN is an error that names the tensor, and the input stays as it was.
+  SafetensorsWriter bad;
+  bad.add_f32("nan_here", {1}, {std::nanf("")});
+  bad.write(d / "b.safetensors");
+  EXPECT_NE(test::error_of([&] { convert_to_half(d / "b.safetensors", d / "b.safetensors"); }).find("nan_here"),
+            std::string::npos);
+  EXPECT_EQ(SafetensorsFile(d / "b.safetensors").get("nan_here").dtype, DType::F32);
+}

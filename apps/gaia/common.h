@@ -39,5 +39,6 @@ void register_generate(CLI::App& app);
 void register_decoder(CLI::App& app);   // gaia decoder train|eval
 void register_decode(CLI::App& app);    // gaia decode
 void register_probe(CLI::App& app);     // gaia probe train|eval
+void register_convert(CLI::App& app);   // gaia convert --half
 
 }  // namespace gaia::app

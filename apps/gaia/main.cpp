@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   gaia::app::register_decoder(app);
   gaia::app::register_decode(app);
   gaia::app::register_probe(app);
+  gaia::app::register_convert(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,6 +1,7 @@
 #include "gaia/core/safetensors.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include <nlohmann/json.hpp>
@@ -143,5 +144,31 @@ std::string SafetensorsWriter::serialize() const {
 }
 
 void SafetensorsWriter::write(const fs::path& path) const { write_file_atomic(path, serialize()); }
+
+double convert_to_half(const fs::path& in, const fs::path& out) {
+  SafetensorsWriter w;
+  double max_err = 0;
+  {
+    SafetensorsFile f(in);
+    for (const auto& [k, v] : f.metadata()) w.set_metadata(k, v);
+    for (const auto& name : f.names()) {
+      const auto& t = f.get(name);
+      if (t.dtype != DType::F32) {
+        w.add(name, t.dtype, t.shape, t.data, t.nbytes);
+        continue;
+      }
+      auto vals = f.to_float(name);
+      std::vector<uint16_t> h(vals.size());
+      for (size_t i = 0; i < vals.size(); ++i) {
+        if (!std::isfinite(vals[i])) fail("{}: tensor '{}' holds a non-finite value", in.string(), name);
+        h[i] = float_to_half(vals[i]);
+        max_err = std::max(max_err, double(std::abs(half_to_float(h[i]) - vals[i])));
+      }
+      w.add(name, DType::F16, t.shape, h.data(), h.size() * sizeof(uint16_t));
+    }
+  }  // the input mapping is closed before the output (possibly the same path) is renamed into place
+  w.write(out);
+  return max_err;
+}
 
 }  // namespace gaia

@@ -53,4 +53,9 @@ class SafetensorsWriter {
   std::map<std::string, std::string> metadata_;
 };
 
+// Re-writes a weights file with every F32 tensor stored as F16 (other dtypes and the metadata unchanged), for
+// shipping models at half the size; gaia's loaders convert back to float32. Returns the largest absolute rounding
+// error, so the caller can say what was lost. Written atomically; `in` and `out` may be the same path.
+double convert_to_half(const fs::path& in, const fs::path& out);
+
 }  // namespace gaia
