@@ -16,14 +16,10 @@ double temporal_change(const torch::Tensor& f) {
   return ((f.slice(0, 1) - f.slice(0, 0, -1)).abs().mean().item<double>()) * 127.5;
 }
 
-namespace {
-
-double psnr(const torch::Tensor& a, const torch::Tensor& b) {  // [-1, 1] images -> PSNR on the [0, 1] scale
+double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b) {
   const double mse = (a.clamp(-1, 1) - b).pow(2).mean().item<double>() / 4.0;
   return 10 * std::log10(1.0 / std::max(mse, 1e-12));
 }
-
-}  // namespace
 
 nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::ImageTokenizer& tok,
                                 const fs::path& dataset, const DecoderEvalOptions& o,
@@ -68,8 +64,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     auto key = torch::arange(0, M, 4, torch::kLong).to(dev);       // the 6.25 Hz frames
     auto gt_key = gt.index_select(0, key);
     auto tok_dec = clip.cond[0];  // the tokenizer decoder on every frame's own tokens
-    tok_key.push_back(psnr(tok_dec.index_select(0, key), gt_key));
-    tok_all.push_back(psnr(tok_dec, gt));
+    tok_key.push_back(psnr_pm1(tok_dec.index_select(0, key), gt_key));
+    tok_all.push_back(psnr_pm1(tok_dec, gt));
     gt_key_change.push_back(temporal_change(gt_key));
     gt_all_change.push_back(temporal_change(gt));
     tok_key_change.push_back(temporal_change(tok_dec.index_select(0, key)));
@@ -84,8 +80,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
         if (progress) progress(done, total);
       })[0];
       secs[s].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-      dif_key[s].push_back(psnr(video.index_select(0, key), gt_key));
-      dif_all[s].push_back(psnr(video, gt));
+      dif_key[s].push_back(psnr_pm1(video.index_select(0, key), gt_key));
+      dif_all[s].push_back(psnr_pm1(video, gt));
       dif_key_change[s].push_back(temporal_change(video.index_select(0, key)));
       dif_all_change[s].push_back(temporal_change(video));
     }

@@ -16,6 +16,8 @@ namespace gaia::decoder {
 // Mean absolute difference between consecutive frames (0-255 scale), averaged over the sequence; frames [M, 3, H, W]
 // in [-1, 1]. The flicker is this for the generated frames minus this for the ground truth.
 double temporal_change(const torch::Tensor& frames);
+// PSNR between images in [-1, 1] (the first is clamped), on the [0, 1] scale.
+double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b);
 
 struct DecoderEvalOptions {
   int clips = 2;                   // held-out clips

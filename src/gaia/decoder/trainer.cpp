@@ -8,6 +8,7 @@
 #include "gaia/core/error.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/geofence.h"
+#include "gaia/decoder/evaluate.h"
 #include "gaia/decoder/io.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/tokenizer/io.h"
@@ -174,9 +175,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
       if (t == 0.5) {
         auto tt = torch::full({1}, t);
-        auto xh = x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)).clamp(-1, 1);
-        auto mse = (xh - clips.frames).pow(2).mean().item<double>() / 4.0;  // [-1, 1] -> [0, 1] range
-        psnr = 10 * std::log10(1.0 / std::max(mse, 1e-12));
+        psnr = psnr_pm1(x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)), clips.frames);
       }
     }
     v["loss"] = loss;
