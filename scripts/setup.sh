@@ -14,6 +14,7 @@ PKGS=(
   libfmt-dev libspdlog-dev     # formatting and logging
   libgtest-dev libgmock-dev libbenchmark-dev
   liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)
+  chromium                     # headless browser: the report test renders gaia report pages and checks screenshots
 )
 
 missing=()

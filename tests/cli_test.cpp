@@ -78,7 +78,7 @@ TEST(Cli, IngestErrorsLeaveNoOutput) {
   expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --out '" + ds.string() + "'"), "already exists");
 }
 
-TEST(Cli, DataStatsSplitAndDemo) {
+TEST(Cli, DataStatsAndSplit) {
   test::TempDir dir;
   fs::path video = make_video(dir.path, 60);
   fs::path ds = dir / "ds";
@@ -104,10 +104,6 @@ TEST(Cli, DataStatsSplitAndDemo) {
   auto info = test::run_gaia("data info '" + ds.string() + "'");
   EXPECT_EQ(info.status, 0) << info.output;
   EXPECT_NE(info.output.find("3 episodes"), std::string::npos) << info.output;
-
-  auto demo = test::run_gaia("demo --video '" + video.string() + "' --out '" + (dir / "demo").string() + "'");
-  EXPECT_EQ(demo.status, 0) << demo.output;
-  EXPECT_NE(demo.output.find("60 frames"), std::string::npos) << demo.output;
 }
 
 TEST(Cli, ConvertToHalf) {

@@ -43,6 +43,7 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   r = test::run_gaia(base + " --stop-after 3 --out " + q(p.dir / "resumed"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "resumed" / "decoder.safetensors"));
+  EXPECT_TRUE(fs::exists(p.dir / "resumed" / "latest.safetensors"));  // EMA weights so far
   r = test::run_gaia(base + " --out " + q(p.dir / "resumed"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("resumed"), std::string::npos) << r.output;

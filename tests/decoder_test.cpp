@@ -10,6 +10,7 @@
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/sampler.h"
 #include "gaia/decoder/tasks.h"
+#include "gaia/decoder/trainer.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/decoder/video.h"
 #include "gaia/plan/plan.h"
@@ -336,4 +337,55 @@ TEST(DecoderVideo, ForwardAndWindowAreRepeatable) {
   NoiseSchedule sch;
   auto a = sample_window(m, sch, w, o), b = sample_window(m, sch, w, o);
   EXPECT_TRUE(torch::equal(a, b)) << (a - b).abs().max().item<float>();
+}
+
+// With cond_image the diffusion runs on the residual over the coarse frame: a perfect coarse frame leaves nothing
+// to diffuse on frames with tokens, while context frames (no tokens, zero coarse frame) are diffused as themselves.
+TEST(DecoderResidual, TrainingTargetIsTheResidualOverTheCoarseFrame) {
+  torch::manual_seed(3);
+  const int64_t B = 2, T = 5, H = 16, W = 32, D = 8;
+  Clips c;
+  c.frames = torch::rand({B, T, 3, H, W}) * 2 - 1;
+  c.tokens = torch::randint(0, 16, {B, T, H / D, W / D}, torch::kLong);
+  c.cond = c.frames.clone();
+  NoiseSchedule sch;
+  auto masks = task_masks(Task::kForward, int(T));
+  auto b = make_task_batch(c, masks, 0, 0.6, 0.0, sch, 16, D);
+  auto tt = torch::full({1}, 0.6);
+  auto r_hat = x_from_v(b.input.x, b.v_true, sch.alpha(tt), sch.sigma(tt));
+  for (int64_t f = 0; f < T; ++f) {
+    auto rf = r_hat.select(1, f), xf = b.input.x.select(1, f);
+    if (masks.context[size_t(f)]) {
+      EXPECT_TRUE(torch::allclose(xf, c.frames.select(1, f))) << "context frame " << f << " is given clean";
+    } else {
+      ASSERT_TRUE(masks.tokens[size_t(f)]);
+      EXPECT_LT(rf.abs().max().item<double>(), 1e-5) << "frame " << f << ": residual of a perfect coarse frame";
+      EXPECT_GT(xf.std().item<double>(), 0.5) << "frame " << f << " is noised";
+    }
+  }
+}
+
+TEST(DecoderResidual, SamplerAddsTheCoarseFrameBack) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: zero output projection, v = 0
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 5);
+  ASSERT_EQ(m->forward(in).abs().max().item<float>(), 0.0f);
+  WindowInput w;
+  w.frames = in.x.clamp(-1, 1);
+  w.context = torch::tensor({1.f, 0.f, 0.f, 0.f, 0.f}).unsqueeze(0);
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  w.cond_image = torch::rand_like(in.x) * 0.2 - 0.1;
+  SampleOptions o;
+  o.steps = 4;
+  NoiseSchedule sch;
+  auto a = sample_window(m, sch, w, o);
+  WindowInput w0 = w;
+  w0.cond_image = torch::zeros_like(w.cond_image);
+  auto b = sample_window(m, sch, w0, o);
+  EXPECT_TRUE(torch::equal(a.select(1, 0), w.frames.select(1, 0))) << "context frame kept";
+  auto gen = a.slice(1, 1), gen0 = b.slice(1, 1), base = w.cond_image.slice(1, 1);
+  auto inside = (gen.abs() < 0.999) & (gen0.abs() < 0.999);  // away from the final clamp
+  ASSERT_GT(inside.sum().item<int64_t>(), 1000);
+  EXPECT_LT(((gen - gen0 - base) * inside).abs().max().item<double>(), 1e-5);
 }

@@ -76,3 +76,37 @@ TEST(ShippedModels, TokenizerReconstructsFreshFrames) {
   auto used = std::get<0>(at::_unique(ids.flatten())).numel();
   EXPECT_GE(used, 100) << "codes used on " << frames.size() << " frames";
 }
+
+// `gaia demo` (the README's first command) with the shipped models, made short: a procedural prompt with the
+// counterfactual replay, and a real clip as the prompt. Every video the report names is in the page.
+TEST(ShippedModels, DemoRunsWithTheShippedModels) {
+  if (!fs::exists(model("world.safetensors"))) GTEST_SKIP() << "models/world.safetensors not shipped";
+  test::TempDir d;
+  const std::string small = " --models " + q(test::source_dir() / "models") +
+                            " --prompt-frames 2 --frames 3 --ddim-steps 2 --fps 6.25 --threads 2";
+  auto r = test::run_gaia("demo" + small + " --out " + q(d / "demo"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const std::string html = read_file(d / "demo" / "report.html");
+  for (const char* s : {"Video prompt and three futures", "Steering", "Text prompts", "Unconditional scene", "Decoders"})
+    EXPECT_NE(html.find(s), std::string::npos) << s;
+  auto manifest = nlohmann::json::parse(read_file(d / "demo" / "report.json"));
+  int videos = 0;
+  for (const auto& s : manifest["sections"])
+    for (const auto& g : s.value("videos", nlohmann::json::array()))
+      for (const auto& it : g["items"]) {
+        EXPECT_TRUE(fs::exists(d / "demo" / it["path"].get<std::string>())) << it["path"];
+        ++videos;
+      }
+  EXPECT_EQ(videos, 2 + 2 + 1 + 1 + (fs::exists(model("decoder.safetensors")) ? 2 : 1));
+  EXPECT_EQ(html.find("src=\"http"), std::string::npos);
+
+  const fs::path clip = test::source_dir().parent_path() / "shared" / "data" / "real" / "highway-sunny-720p25.mp4";
+  if (!fs::exists(clip)) return;  // the real clips live beside the repository, not in it
+  r = test::run_gaia("demo" + small + " --video " + q(clip) + " --out " + q(d / "real"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(d / "real" / "videos" / "real.gif"));
+  EXPECT_FALSE(fs::exists(d / "real" / "videos" / "steer_truth.gif"));  // no replay for a real clip
+  r = test::run_gaia("demo --models " + q(d / "nowhere") + " --out " + q(d / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("nowhere/world.safetensors: missing"), std::string::npos) << r.output;
+}

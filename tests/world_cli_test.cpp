@@ -48,6 +48,10 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
   auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 30 --val-every 15 --stop-after 15 --out " + q(p.run));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_FALSE(fs::exists(p.run / "world.safetensors"));
+  ASSERT_TRUE(fs::exists(p.run / "latest.safetensors"));  // the weights so far, usable while training goes on
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "latest.safetensors") + p.tiny() +
+                     " --max-windows 2 --out " + q(p.dir / "eval-latest"));
+  EXPECT_EQ(r.status, 0) << r.output;
   r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 30 --val-every 15 --out " + q(p.run));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("resumed"), std::string::npos) << r.output;
@@ -112,4 +116,66 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   r = test::run_gaia("generate" + w + " --steer sideways --out " + q(p.dir / "x"));
   EXPECT_NE(r.output.find("sideways"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
+}
+
+// gaia eval end to end on the tiny pipeline (shipped probes: they are fully convolutional, any frame size works):
+// every part runs, the numbers are where they must be, and the report is written.
+TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
+  auto& p = Pipeline::get();
+  if (!fs::exists(p.run / "world.safetensors")) {
+    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  const fs::path models = test::source_dir() / "models";
+  const std::string base = "eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + " --tokenizer " +
+                           q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " +
+                           q(models / "probe-dynamics.safetensors") + " --scene-probe " +
+                           q(models / "probe-scene.safetensors") + p.tiny();
+  auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames 2 --futures 2" +
+                          " --text-frames 1 --scales 0 2 --long-seconds 2 --window-seconds 1 --out " + q(p.dir / "eval"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
+  const auto& a = j["action_control"];
+  EXPECT_EQ(a["rollouts"].get<int>(), 2 * 8);  // prompts x commands
+  for (const char* k : {"conditioned", "without_actions", "counterfactual_probe"})
+    EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
+  EXPECT_GT(a["counterfactual"]["psnr_db"].get<double>(), 5.0);
+  EXPECT_GE(a["counterfactual"]["fd_probe"].get<double>(), 0.0);
+  // Text: one row per scale, then the negative prompt and the schedules; accuracies are fractions.
+  const auto& runs = j["text_control"]["runs"];
+  ASSERT_EQ(runs.size(), 4u);
+  for (const auto& row : runs)
+    for (const char* k : {"weather", "time_of_day", "light"}) {
+      EXPECT_GE(row[k].get<double>(), 0.0);
+      EXPECT_LE(row[k].get<double>(), 1.0);
+    }
+  const double dist = j["futures"]["mean_pairwise_token_distance"].get<double>();
+  EXPECT_GT(dist, 0.0);  // top-k sampling: futures differ
+  EXPECT_LE(dist, 1.0);
+  const auto& lr = j["long_rollout"];
+  EXPECT_EQ(lr["frames"].get<int>(), 13);  // 2 s at 6.25 Hz, rounded
+  EXPECT_EQ(lr["windows"].size(), 2u);     // two 1 s windows of 6 frames
+  for (const auto& w : lr["windows"]) {
+    EXPECT_GE(w["copy_rate"].get<double>(), 0.0);
+    EXPECT_LE(w["entropy_bits"].get<double>(), 8.0 + 1e-9);  // K = 256
+  }
+  for (const char* f : {"report.html", "report.json", "videos/action_generated.gif", "videos/action_counterfactual.gif",
+                        "videos/text_prompts.gif", "videos/futures.gif", "videos/long_rollout.gif",
+                        "plots/action_curvature.svg", "plots/text_guidance.svg", "plots/long_rollout.svg"})
+    EXPECT_TRUE(fs::exists(p.dir / "eval" / f)) << f;
+  EXPECT_FALSE(fs::exists(p.dir / "eval" / "counterfactual"));  // replay frames are temporary
+  const std::string html = read_file(p.dir / "eval" / "report.html");
+  for (const char* s : {"Action control", "Text control", "Multiple futures", "Long rollout", "data:image/gif;base64,"})
+    EXPECT_NE(html.find(s), std::string::npos) << s;
+
+  // Bad inputs: one clear line, non-zero exit, nothing written.
+  r = test::run_gaia(base + " --only action,bogus --out " + q(p.dir / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--only: unknown part 'bogus'"), std::string::npos) << r.output;
+  r = test::run_gaia("eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + " --tokenizer " +
+                     q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " + q(models / "probe-scene.safetensors") +
+                     " --scene-probe " + q(models / "probe-scene.safetensors") + p.tiny() + " --out " + q(p.dir / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("not a dynamics probe"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad" / "eval.json"));
 }

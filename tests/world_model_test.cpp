@@ -238,6 +238,43 @@ TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {
   EXPECT_FALSE(torch::equal(s1.tokens[0], s1.tokens[1]));
 }
 
+// One batched rollout with a prompt, actions and text per future gives what separate rollouts give (argmax), with
+// and without guidance, including across the sliding window: evaluation runs many prompts x commands this way.
+TEST(WorldRollout, PerFuturePromptsMatchSeparateRollouts) {
+  Config c = tiny();
+  auto m = small_model(c, 8);
+  const int64_t N = 3, P = 2, F = c.world.context_steps, m_txt = c.world.text_tokens;
+  torch::manual_seed(11);
+  RolloutPrompt batched;
+  batched.tokens = torch::randint(0, kK, {N, P, kN}, torch::kLong);
+  batched.actions = torch::randn({N, P + F, 2});
+  batched.text_ids = torch::randint(2, c.world.text_vocab, {N, P + F, m_txt}, torch::kLong);
+  for (double scale : {0.0, 2.0}) {
+    RolloutOptions o;
+    o.frames = int(F);
+    o.futures = int(N);
+    o.sampling.strategy = Strategy::Argmax;
+    o.guidance.scale = scale;
+    auto all = rollout(m, batched, o);
+    ASSERT_EQ(all.tokens.sizes(), (std::vector<int64_t>{N, P + F, kN}));
+    o.futures = 1;
+    for (int64_t i = 0; i < N; ++i) {
+      RolloutPrompt one;
+      one.tokens = batched.tokens[i];
+      one.actions = batched.actions[i];
+      one.text_ids = batched.text_ids[i];
+      auto r = rollout(m, one, o);
+      EXPECT_TRUE(torch::equal(r.tokens[0], all.tokens[i])) << "future " << i << ", guidance " << scale;
+    }
+  }
+  RolloutPrompt bad = batched;
+  bad.actions = torch::zeros({N + 1, P + F, 2});
+  RolloutOptions o;
+  o.frames = int(F);
+  o.futures = int(N);
+  EXPECT_NE(test::error_of([&] { rollout(m, bad, o); }).find("futures = 3"), std::string::npos);
+}
+
 TEST(WorldRollout, BadPromptsAreClearErrors) {
   Config c = tiny();
   auto m = small_model(c);

@@ -13,6 +13,7 @@
 #include "gaia/data/video_io.h"
 #include "gaia/decoder/evaluate.h"
 #include "gaia/decoder/io.h"
+#include "gaia/decoder/pipeline.h"
 #include "gaia/decoder/trainer.h"
 #include "gaia/decoder/video.h"
 #include "gaia/synth/synth.h"
@@ -48,24 +49,6 @@ torch::Tensor read_tokens(const fs::path& p) {
 }
 
 // [F, M, 3, H, W] in [-1, 1] -> M frames with the futures side by side.
-std::vector<cv::Mat> to_frames(const torch::Tensor& v) {
-  std::vector<cv::Mat> out;
-  const int64_t F = v.size(0), M = v.size(1), H = v.size(3), W = v.size(4);
-  auto cpu = v.to(torch::kCPU).contiguous();
-  for (int64_t k = 0; k < M; ++k) {
-    std::vector<cv::Mat> cols;
-    for (int64_t f = 0; f < F; ++f) {
-      cv::Mat m(int(H), int(W), CV_8UC3);
-      tokenizer::tensor_to_image(cpu[f][k], m.data);
-      cols.push_back(m);
-    }
-    cv::Mat frame;
-    cv::hconcat(cols, frame);
-    out.push_back(frame);
-  }
-  return out;
-}
-
 std::vector<int> parse_steps(const std::string& s) {
   std::vector<int> out;
   size_t i = 0;
@@ -197,43 +180,22 @@ void register_decode(CLI::App& app) {
     if (ids.min().item<int64_t>() < 0 || ids.max().item<int64_t>() >= t->cfg.codebook_size)
       fail("{}: token ids must be in [0, {}) (the tokenizer's codebook)", *tokens, t->cfg.codebook_size);
     // The tokenizer's decoding of every token frame: the --fast output, and the video decoder's conditioning.
-    std::vector<torch::Tensor> cond_f;
-    {
-      torch::NoGradGuard ng;
-      for (int64_t f = 0; f < F; ++f) {
-        std::vector<torch::Tensor> parts;
-        for (int64_t s = 0; s < N; s += 16)
-          parts.push_back(t->decode_tokens(ids[f].slice(0, s, std::min(N, s + 16)).to(dev)).clamp(-1, 1));
-        cond_f.push_back(torch::cat(parts));
-      }
-    }
-    auto cond = torch::stack(cond_f);  // [F, N, 3, H, W]
+    auto cond = decoder::coarse_frames(t, ids, dev);  // [F, N, 3, H, W]
     torch::Tensor video;
     double out_fps = *token_fps;
     if (*fast) {
       video = cond;
     } else {
-      Config dc;
-      auto model = decoder::load_decoder(*weights, dev, &dc);
-      if (model->K != t->cfg.codebook_size || model->D != t->cfg.downsample)
-        fail("{}: the decoder was trained with K = {}, D = {}; the tokenizer has K = {}, D = {}", *weights, model->K,
-             model->D, t->cfg.codebook_size, t->cfg.downsample);
-      decoder::DecodeOptions o;
-      o.sample.steps = *steps > 0 ? *steps : dc.decoder.ddim_steps;
-      o.sample.mix_probability = dc.decoder.mix_probability;
-      o.sample.mix_weight = dc.decoder.mix_weight;
-      o.sample.seed = uint64_t(run.run.seed);
-      o.token_fps = *token_fps;
-      o.out_fps = *fps;
-      decoder::NoiseSchedule sched{-15.0, 15.0, dc.decoder.schedule_shift};
-      const int total = decoder::count_windows(N, dc.decoder.frames, o.token_fps, o.out_fps);
-      ProgressBar bar(total, "decode");
-      video = decoder::decode_video(model, sched, ids.to(dev), model->cfg.cond_image ? cond : torch::Tensor(), o,
-                                    [&](int d, int) { bar.update(d); });
-      bar.finish();
+      std::unique_ptr<ProgressBar> bar;  // the window count is known once the decoder's config is read
+      video = decoder::diffusion_decode(t, *weights, ids, cond, *steps, *token_fps, *fps, uint64_t(run.run.seed), dev,
+                                        [&](int d, int total) {
+                                          if (!bar) bar = std::make_unique<ProgressBar>(total, "decode");
+                                          bar->update(d);
+                                        });
+      if (bar) bar->finish();
       out_fps = *fps;
     }
-    auto frames = to_frames(video);
+    auto frames = decoder::side_by_side(video);
     fs::path out = flags->out;
     if (out.has_parent_path()) fs::create_directories(out.parent_path());
     data::write_video(out, frames, out_fps);

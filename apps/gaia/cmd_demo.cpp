@@ -1,114 +1,317 @@
-// gaia demo: the README's first command. Shows what the system does with what is built so far: the plan of the
-// config, a small procedural driving dataset (with a counterfactual replay steering left), its balancing
-// statistics, and a video + contact sheet to look at; with --video, the same summary for a real clip.
+// gaia demo: the README's first command. With the shipped models (models/): a procedural drive as the video
+// prompt, three sampled futures, steer left / steer right against the counterfactual replay of the same world, a
+// text-prompted change (night, rain), an unconditional scene, all decoded (one future through the video diffusion
+// decoder, the rest through the tokenizer's decoder) and gathered into one HTML report. --from-scratch first runs
+// the whole training recipe (`gaia train-all`) and uses what it made.
+#include <chrono>
 #include <cstdio>
+#include <cstdlib>
+
+#include <opencv2/imgproc.hpp>
 
 #include "common.h"
+#include "gaia/control/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
-#include "gaia/data/ingest.h"
+#include "gaia/data/gif.h"
 #include "gaia/data/video_io.h"
+#include "gaia/decoder/pipeline.h"
 #include "gaia/plan/plan.h"
+#include "gaia/report/report.h"
 #include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/torch/tensor_io.h"
+#include "gaia/world/batch.h"
+#include "gaia/world/rollout.h"
 
 namespace gaia::app {
 
 namespace {
 
-std::vector<cv::Mat> episode_frames(const data::Episode& ep) {
-  std::vector<cv::Mat> f;
-  for (int64_t i = 0; i < ep.size(); ++i) f.push_back(ep.frame_bgr(i));
-  return f;
+using Rows = std::vector<std::vector<cv::Mat>>;
+
+struct DemoFlags {
+  std::string models = "models", video;
+  int prompt_frames = 3, frames = 10, ddim_steps = 10;
+  double fps = 12.5, guidance = 3.0;
+  bool from_scratch = false;
+};
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Frames of one rollout row through the tokenizer decoder, with the prompt frames outlined.
+std::vector<cv::Mat> outlined(const std::vector<cv::Mat>& frames, int64_t P) {
+  std::vector<cv::Mat> out;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    cv::Mat f = frames[k].clone();
+    if (int64_t(k) < P) cv::rectangle(f, {0, 0}, {f.cols - 1, f.rows - 1}, {255, 255, 255}, 1);
+    out.push_back(f);
+  }
+  return out;
 }
 
 }  // namespace
 
 void register_demo(CLI::App& app) {
-  auto* cmd = app.add_subcommand("demo", "end-to-end demo: plan, procedural driving data, counterfactual replay, videos");
+  auto* cmd = app.add_subcommand(
+      "demo", "end-to-end demo with the shipped models: video prompt -> futures, steering, text, decoded, HTML report");
   auto flags = std::make_shared<SharedFlags>();
-  auto video = std::make_shared<std::string>();
-  auto episodes = std::make_shared<int>(6);
-  auto seconds = std::make_shared<double>(6.0);
-  cmd->add_option("--video", *video, "also ingest a real driving clip and summarise it");
-  cmd->add_option("--episodes", *episodes, "procedural episodes to render");
-  cmd->add_option("--seconds", *seconds, "seconds per episode");
+  auto d = std::make_shared<DemoFlags>();
+  cmd->add_option("--models", d->models, "directory with the shipped weights (tokenizer, world, decoder, probes)");
+  cmd->add_option("--video", d->video, "a driving video as the prompt instead of a procedural drive (e.g. a real clip)");
+  cmd->add_option("--prompt-frames", d->prompt_frames, "video prompt frames (6.25 Hz)");
+  cmd->add_option("--frames", d->frames, "frames to generate (6.25 Hz)");
+  cmd->add_option("--ddim-steps", d->ddim_steps, "DDIM steps of the video decoder (paper: 50; 10 keeps the demo short)");
+  cmd->add_option("--fps", d->fps, "output rate of the video decoder: 6.25, 12.5 or 25 Hz");
+  cmd->add_option("--guidance", d->guidance, "classifier-free guidance scale of the text-prompted rollouts");
+  cmd->add_flag("--from-scratch", d->from_scratch, "first train every model with `gaia train-all` (hours on a CPU)");
   add_shared_flags(cmd, flags.get(), "output directory (default: demo-out)");
   cmd->callback([=] {
+    const auto t_start = std::chrono::steady_clock::now();
     Config c = resolve_config(*flags);
     apply_threads(c);
-    fs::path out = flags->out.empty() ? fs::path("demo-out") : fs::path(flags->out);
-    std::printf("== gaia demo ==\n\n-- plan of config '%s' --\n%s", c.name.c_str(),
-                plan::format_plan(plan::make_plan(c), c).c_str());
-
-    // 1. Procedural driving data: one episode per weather, at the config's resolution.
-    std::printf("\n-- procedural driving world: %d episodes x %.3g s at %dx%d --\n", *episodes, *seconds, c.data.height, c.data.width);
-    fs::path ds_dir = out / "synth";
-    synth::SynthOptions so;
-    so.height = c.data.height;
-    so.width = c.data.width;
-    so.seconds = *seconds;
-    so.seed = c.run.seed;
-    so.overwrite = true;
-    const char* weathers[] = {"clear", "rain", "fog", "snow", "overcast", "clear"};
-    const char* times[] = {"day", "dusk", "night", "day", "day", "night"};
-    const int64_t per = static_cast<int64_t>(so.seconds * so.fps);
-    ProgressBar bar(per * *episodes, "synth");
-    std::vector<cv::Mat> thumbs;
-    std::vector<std::string> labels;
-    for (int e = 0; e < *episodes; ++e) {
-      so.weather = weathers[e % 6];
-      so.time_of_day = times[e % 6];
-      auto m = synth::write_episode(ds_dir, so, e, [&](int64_t d, int64_t) { bar.update(per * e + d); });
-      data::Episode ep(ds_dir / "episodes" / m.id);
-      thumbs.push_back(ep.frame_bgr(ep.size() / 2));
-      labels.push_back(ep.caption(ep.size() / 2));
+    const fs::path out = flags->out.empty() ? fs::path("demo-out") : fs::path(flags->out);
+    fs::path models = d->models;
+    if (d->from_scratch) {
+      // The recipe as a child process, so its stages resume exactly as `gaia train-all` would.
+      models = out / "models";
+      std::string cmdline = "\"" + fs::read_symlink("/proc/self/exe").string() + "\" train-all --ship \"" +
+                            models.string() + "\" --out \"" + (out / "runs").string() + "\"";
+      if (!flags->config.empty()) cmdline += " --config \"" + flags->config + "\"";
+      if (std::system(cmdline.c_str()) != 0) fail("gaia demo --from-scratch: the training recipe failed (see above)");
     }
+    auto need = [&](const char* name) {
+      fs::path p = models / name;
+      if (!fs::exists(p))
+        fail("{}: missing; the demo uses the shipped models (run from the repository root, pass --models DIR, or "
+             "train them with `gaia demo --from-scratch`)", p.string());
+      return p;
+    };
+    auto dev = parse_device(c.run.device);
+    auto m = control::load_models(need("world.safetensors"), need("tokenizer.safetensors"),
+                                  need("probe-dynamics.safetensors"), need("probe-scene.safetensors"), dev);
+    const fs::path decoder_w = models / "decoder.safetensors";
+    const auto& wc = m.info.config;
+    const int64_t P = d->prompt_frames, F = d->frames;
+    if (P < 1 || F < 1) fail("--prompt-frames and --frames must be >= 1");
+    const double rate = wc.data.world_fps;
+    const int stride = int(std::lround(wc.data.native_fps / rate));
+    std::printf("== gaia demo ==  world model %.2fM parameters, T = %d steps of %lld tokens, tokenizer %dx%d -> %lldx%lld\n",
+                double(m.world->parameter_count()) / 1e6, wc.world.context_steps,
+                (long long)m.world->layout.length() / wc.world.context_steps, m.tok->height, m.tok->width,
+                (long long)m.info.grid_h, (long long)m.info.grid_w);
+
+    // 1. The video prompt: a drive in the procedural world that no model has seen (another seed), or --video.
+    std::vector<cv::Mat> prompt_frames, continuation;  // continuation: what really came next (for --video)
+    auto prompt_actions = torch::full({P, 2}, std::nan(""));
+    double v0 = 8.0;  // m/s held by the steering commands when the prompt's speed is unknown
+    std::unique_ptr<data::Episode> ep;
+    std::string prompt_name;
+    if (!d->video.empty()) {
+      auto frames = data::read_frames_at_rate(d->video, rate, P + F, m.tok->height, m.tok->width);
+      if (int64_t(frames.size()) < P)
+        fail("{}: {} frames at {} Hz, the prompt needs {}", d->video, frames.size(), rate, P);
+      prompt_frames.assign(frames.begin(), frames.begin() + P);
+      continuation.assign(frames.begin(), frames.end());
+      prompt_name = fs::path(d->video).filename().string();
+    } else {
+      synth::SynthOptions so;
+      so.height = m.tok->height;
+      so.width = m.tok->width;
+      so.fps = wc.data.native_fps;
+      so.seconds = double((P + F + 1) * stride) / so.fps + 0.5;
+      so.seed = 20261123;
+      so.weather = "clear";
+      so.time_of_day = "day";
+      so.scene = "straight";
+      so.overwrite = true;
+      const fs::path ds_dir = out / "prompt";
+      auto meta = synth::write_episode(ds_dir, so, 0);
+      ep = std::make_unique<data::Episode>(ds_dir / "episodes" / meta.id);
+      for (int64_t k = 0; k < P; ++k) {
+        prompt_frames.push_back(ep->frame_bgr(k * stride));
+        prompt_actions[k][0] = ep->speed(k * stride) / world::kSpeedScale;
+        prompt_actions[k][1] = ep->curvature(k * stride) / world::kCurvatureScale;
+      }
+      v0 = std::max(4.0, double(ep->speed((P - 1) * stride)));
+      prompt_name = meta.id + ", \"" + ep->caption(0) + "\"";
+    }
+    auto prompt = tokenizer::encode_frames(m.tok, prompt_frames, dev).reshape({P, -1}).to(torch::kCPU).to(torch::kLong);
+    std::printf("prompt: %s, %lld frames at %g Hz\n", prompt_name.c_str(), (long long)P, rate);
+
+    // 2. One batched rollout: three futures (no actions after the prompt), steer left, steer right.
+    const std::vector<std::pair<std::string, double>> steer = {{"steer left", 0.01}, {"steer right", -0.01}};
+    const int futures = 3;
+    const int64_t R = futures + int64_t(steer.size());
+    world::RolloutPrompt rp;
+    rp.tokens = prompt.unsqueeze(0).repeat({R, 1, 1});
+    rp.actions = torch::full({R, P + F, 2}, std::nan(""));
+    rp.actions.narrow(1, 0, P).copy_(prompt_actions.unsqueeze(0).expand({R, P, 2}));
+    for (size_t s = 0; s < steer.size(); ++s) {
+      auto a = rp.actions[futures + int64_t(s)].narrow(0, P - 1, F + 1);
+      a.select(1, 0).fill_(v0 / world::kSpeedScale);
+      a.select(1, 1).fill_(steer[s].second / world::kCurvatureScale);
+    }
+    world::RolloutOptions ro;
+    ro.frames = int(F);
+    ro.futures = int(R);
+    ro.sampling.top_k = wc.world.top_k;
+    ro.seed = uint64_t(c.run.seed);
+    const int64_t total_frames = 3 * F;
+    ProgressBar bar(total_frames, "rollouts");
+    int64_t done = 0;
+    auto r1 = world::rollout(m.world, rp, ro, [&](int k, int) { bar.update(done + k); });
+    done += F;
+
+    // 3. Text: the same prompt turned to night and to rain, with guidance and the opposite as a negative prompt.
+    const std::vector<std::pair<std::string, std::string>> texts = {{"night", "daytime"}, {"heavy rain", "clear skies"}};
+    const int64_t M = wc.world.text_tokens, Tn = int64_t(texts.size());
+    world::RolloutPrompt tp;
+    tp.tokens = prompt.unsqueeze(0).repeat({Tn, 1, 1});
+    tp.text_ids = torch::zeros({Tn, P + F, M}, torch::kLong);
+    tp.negative_text_ids = torch::zeros({Tn, P + F, M}, torch::kLong);
+    for (int64_t i = 0; i < Tn; ++i) {
+      tp.text_ids[i].copy_(torch::tensor(m.info.vocab.encode(texts[size_t(i)].first, M)).unsqueeze(0).expand({P + F, M}));
+      tp.negative_text_ids[i].copy_(
+          torch::tensor(m.info.vocab.encode(texts[size_t(i)].second, M)).unsqueeze(0).expand({P + F, M}));
+    }
+    world::RolloutOptions to = ro;
+    to.futures = int(Tn);
+    to.guidance.scale = d->guidance;
+    to.guidance.frames = world::GuidanceSchedule::Frames::Cosine;  // Fig. 6: guide the first frames most
+    to.guidance.plateau = int(F / 2);
+    to.guidance.total_frames = int(F);
+    auto r2 = world::rollout(m.world, tp, to, [&](int k, int) { bar.update(done + k); });
+    done += F;
+
+    // 4. An unconditional scene, from nothing.
+    world::RolloutOptions uo = ro;
+    uo.futures = 1;
+    auto r3 = world::rollout(m.world, world::RolloutPrompt{}, uo, [&](int k, int) { bar.update(done + k); });
     bar.finish();
-    data::Dataset ds(ds_dir);
-    for (size_t i = 0; i < ds.size(); ++i) {
-      data::Episode ep = ds.episode(i);
-      std::printf("  %s: %-8s %-5s  speed %4.1f m/s  \"%s\"\n", ep.meta().id.c_str(), ep.meta().weather.c_str(),
-                  ep.meta().time_of_day.c_str(), ep.speed(ep.size() / 2), ep.caption(ep.size() / 2).c_str());
-    }
-    data::write_png(out / "contact_sheet.png", synth::contact_sheet(thumbs, labels, 3, 320));
 
-    // 2. Counterfactual replay: the first episode again, steering left from 2 s on (ground truth for action control).
-    data::Episode first = ds.episode(0);
-    const int64_t from = std::min<int64_t>(50, first.size() - 1);
-    std::vector<synth::ActionStep> left;
-    for (int64_t i = from; i < first.size(); ++i) left.push_back({std::max(5.0f, first.speed(i)), 0.02});
-    auto rm = synth::replay(first, from, left, out / "replay", first.meta().id + "-steer-left", true);
-    data::Episode replayed(out / "replay" / "episodes" / rm.id);
-    std::vector<cv::Mat> side;
-    for (int64_t i = 0; i < replayed.size(); ++i) {
-      cv::Mat s;
-      cv::hconcat(first.frame_bgr(from + i), replayed.frame_bgr(i), s);
-      side.push_back(s);
+    // 5. Ground truth for the steering: the prompt's world replayed under the same commands (procedural prompts).
+    std::vector<std::vector<cv::Mat>> truth;
+    for (size_t s = 0; ep && s < steer.size(); ++s) {
+      std::vector<synth::ActionStep> acts(size_t((F + 1) * stride), {v0, steer[s].second});
+      auto rm = synth::replay(*ep, (P - 1) * stride, acts, out / "counterfactual", fmt::format("{}-cf{}", ep->meta().id, s),
+                              true);
+      data::Episode rep(out / "counterfactual" / "episodes" / rm.id);
+      std::vector<cv::Mat> t(prompt_frames.begin(), prompt_frames.end() - 1);
+      for (int64_t k = 0; k <= F; ++k) t.push_back(rep.frame_bgr(k * stride));
+      truth.push_back(t);
     }
-    data::write_video(out / "replay_steer_left.mp4", side, first.meta().fps);
-    data::write_video(out / "episode0.mp4", episode_frames(first), first.meta().fps);
-    std::printf("\n-- counterfactual replay: %s steering left (curvature +0.02 1/m) from frame %lld --\n",
-                first.meta().id.c_str(), (long long)from);
-    std::printf("  recorded | replayed side by side: %s\n", (out / "replay_steer_left.mp4").c_str());
 
-    // 3. Balancing statistics of the little dataset (paper §3).
-    std::printf("\n  try: gaia data stats %s --balance weather,speed,curvature\n", ds_dir.c_str());
+    // 6. Decoding: the tokenizer's decoder for every rollout, the video decoder for the first future.
+    auto f1 = control::decode(m, r1.tokens), f2 = control::decode(m, r2.tokens), f3 = control::decode(m, r3.tokens);
+    nlohmann::json sections = nlohmann::json::array();
+    auto video = [&](const std::string& rel, const std::vector<cv::Mat>& frames, double fps) {
+      fs::create_directories((out / rel).parent_path());
+      data::write_gif(out / rel, frames, fps);
+      data::write_video(fs::path(out / rel).replace_extension(".mp4"), frames, fps);
+    };
+    const double show = rate / 2;  // 6.25 Hz frames shown at half speed: short clips are easier to follow
+    video("videos/futures.gif",
+          control::tile(Rows{outlined(f1[0], P), outlined(f1[1], P), outlined(f1[2], P)}, {"future 1", "future 2", "future 3"}),
+          show);
+    video("videos/prompt.gif", control::tile(Rows{outlined(prompt_frames, P)}, {"prompt"}), show);
+    video("videos/steer_generated.gif",
+          control::tile(Rows{outlined(f1[3], P), outlined(f1[4], P)}, {"left (model)", "right (model)"}), show);
+    if (!truth.empty())
+      video("videos/steer_truth.gif",
+            control::tile(Rows{outlined(truth[0], P), outlined(truth[1], P)}, {"left (replay)", "right (replay)"}), show);
+    if (!continuation.empty()) video("videos/real.gif", control::tile(Rows{outlined(continuation, P)}, {"real"}), show);
+    video("videos/text.gif", control::tile(Rows{outlined(f2[0], P), outlined(f2[1], P)}, {"night", "heavy rain"}), show);
+    video("videos/unconditional.gif", control::tile(Rows{f3[0]}, {"unconditional"}), show);
 
-    if (!video->empty()) {
-      data::IngestOptions o;
-      o.height = c.data.height;
-      o.width = c.data.width;
-      o.overwrite = true;
-      auto m = data::ingest_video(*video, out / "real", o);
-      double dur = m.num_frames / m.fps;
-      std::printf("\n-- dataset summary of %s --\n", video->c_str());
-      std::printf("  episode %s: %lld frames at %.4g fps (%.2f s), stored as %dx%d %s in %s\n", m.id.c_str(),
-                  (long long)m.num_frames, m.fps, dur, m.height, m.width, m.frame_codec.c_str(), (out / "real").c_str());
-      int64_t steps = static_cast<int64_t>(dur * c.data.world_fps);
-      std::printf("  at the world model's %.4g Hz: %lld steps = %lld image tokens (n = %d per frame)\n", c.data.world_fps,
-                  (long long)steps, (long long)(steps * c.image_tokens()), c.image_tokens());
+    // Probe read-back of what the demo asked for (one rollout each: an illustration; `gaia eval` measures).
+    auto read_curv = [&](const std::vector<cv::Mat>& f) {
+      return control::read_dynamics(m, std::vector<cv::Mat>(f.begin() + P - 1, f.end())).select(1, 1).mean().item<double>();
+    };
+    nlohmann::json readback = {{"steer_left_curvature_per_km", 1000 * read_curv(f1[3])},
+                               {"steer_right_curvature_per_km", 1000 * read_curv(f1[4])},
+                               {"commanded_left_per_km", 10.0},
+                               {"commanded_right_per_km", -10.0}};
+    auto scene_of = [&](const std::vector<cv::Mat>& f, int attribute) {
+      auto cls = control::read_scene(m, std::vector<cv::Mat>(f.end() - 1, f.end()));
+      const auto& names = attribute == 0 ? probe::weather_classes() : probe::time_classes();
+      return names[size_t(cls[0][attribute].item<int64_t>())];
+    };
+    readback["night_prompt_last_frame_time_of_day"] = scene_of(f2[0], 1);
+    readback["rain_prompt_last_frame_weather"] = scene_of(f2[1], 0);
+
+    nlohmann::json dec_items = nlohmann::json::array();
+    double dec_seconds = 0;
+    if (fs::exists(decoder_w)) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto ids = r1.tokens.narrow(0, 0, 1).view({1, P + F, m.info.grid_h, m.info.grid_w});
+      auto coarse = decoder::coarse_frames(m.tok, ids, dev);
+      std::unique_ptr<ProgressBar> dbar;
+      auto v = decoder::diffusion_decode(m.tok, decoder_w, ids, coarse, d->ddim_steps, rate, d->fps,
+                                         uint64_t(c.run.seed), dev, [&](int k, int total) {
+                                           if (!dbar) dbar = std::make_unique<ProgressBar>(total, "video decoder");
+                                           dbar->update(k);
+                                         });
+      if (dbar) dbar->finish();
+      dec_seconds = seconds_since(t0);
+      video("videos/future1_video_decoder.gif", decoder::side_by_side(v), d->fps / 2);
+      dec_items.push_back({{"label", fmt::format("video decoder, {} DDIM steps, {} Hz", d->ddim_steps, d->fps)},
+                           {"path", "videos/future1_video_decoder.gif"}});
+    } else {
+      std::printf("note: %s missing: the video diffusion decoder is skipped (tokenizer decoder only)\n",
+                  decoder_w.c_str());
     }
-    std::printf("\nwrote %s: contact_sheet.png, episode0.mp4, replay_steer_left.mp4, synth/ (dataset)\n", out.c_str());
+    dec_items.push_back({{"label", "tokenizer decoder, 6.25 Hz"}, {"path", "videos/futures.gif"}});
+
+    const std::string cmdline = g_command_line;
+    nlohmann::json futures_items = {{{"label", "prompt"}, {"path", "videos/prompt.gif"}},
+                                    {{"label", "futures"}, {"path", "videos/futures.gif"}}};
+    if (!continuation.empty()) futures_items.push_back({{"label", "real"}, {"path", "videos/real.gif"}});
+    nlohmann::json steer_items = {{{"label", "generated"}, {"path", "videos/steer_generated.gif"}}};
+    if (!truth.empty()) steer_items.push_back({{"label", "ground truth"}, {"path", "videos/steer_truth.gif"}});
+    sections.push_back({{"title", "Video prompt and three futures"},
+                        {"text", fmt::format("A {}-frame prompt from a drive the models never saw (outlined), then {} "
+                                             "frames at {} Hz sampled with top-k = {}, shown at half speed.",
+                                             P, F, rate, wc.world.top_k)},
+                        {"videos", {{{"caption", continuation.empty() ? "prompt | three futures"
+                                                                      : "prompt | three futures | what really happened"},
+                                     {"items", futures_items}}}},
+                        {"commands", {cmdline}}});
+    sections.push_back({{"title", "Steering"},
+                        {"text", "The same prompt with the actions commanded: curvature +0.01 (left) and -0.01 1/m "
+                                 "(right), the speed held. Beside it the procedural world replayed under the same "
+                                 "commands: the counterfactual ground truth."},
+                        {"videos", {{{"caption", truth.empty() ? "world model" : "world model | counterfactual replay"},
+                                     {"items", steer_items}}}},
+                        {"metrics", readback},
+                        {"commands", {cmdline}}});
+    sections.push_back({{"title", "Text prompts"},
+                        {"text", fmt::format("The same prompt with a text prompt at every step, classifier-free guidance "
+                                             "s = {} (cosine decay over frames) and the opposite as a negative prompt.",
+                                             d->guidance)},
+                        {"videos", {{{"caption", "\"night\" | \"heavy rain\""},
+                                     {"items", {{{"label", "text"}, {"path", "videos/text.gif"}}}}}}},
+                        {"commands", {cmdline}}});
+    sections.push_back({{"title", "Unconditional scene"},
+                        {"text", "Generated from nothing: no prompt, no actions, no text."},
+                        {"videos", {{{"caption", "unconditional"},
+                                     {"items", {{{"label", "scene"}, {"path", "videos/unconditional.gif"}}}}}}}});
+    sections.push_back({{"title", "Decoders"},
+                        {"text", fmt::format("The first future through the video diffusion decoder ({:.0f} s on this "
+                                             "machine) and through the tokenizer's frame-by-frame decoder.",
+                                             dec_seconds)},
+                        {"videos", {{{"caption", "video decoder | tokenizer decoder"}, {"items", dec_items}}}}});
+    nlohmann::json manifest = {
+        {"title", "gaia demo"},
+        {"subtitle", fmt::format("shipped models from {}; {:.0f} s on this machine", models.string(), seconds_since(t_start))},
+        {"sections", sections}};
+    write_file_atomic(out / "report.json", manifest.dump(2) + "\n");
+    report::write_report(out, out / "report.html");
+    std::printf("read-back: %s\n", readback.dump().c_str());
+    std::printf("wrote %s (videos in %s) in %.0f s\n", (out / "report.html").c_str(), (out / "videos").c_str(),
+                seconds_since(t_start));
   });
 }
 

@@ -108,16 +108,8 @@ void register_generate(CLI::App& app) {
       prompt_actions.select(1, 1).div_(world::kCurvatureScale);
     } else if (!g->video.empty()) {
       if (!tok) fail("--video needs --tokenizer to turn the frames into tokens");
-      data::VideoSource v(g->video);
-      const double fps = v.fps() > 0 ? v.fps() : 25.0;
-      const double every = fps / tok_cfg.data.world_fps;
-      std::vector<cv::Mat> frames;
-      data::VideoFrame f;
-      // Subsample to the world-model rate (§2.3): frame k of the prompt is the source frame nearest k * every.
-      for (int i = 0; v.next(&f) && int64_t(frames.size()) < want_p; ++i)
-        if (i == int(std::lround(double(frames.size()) * every)))
-          frames.push_back(data::resize_center_crop(f.bgr, tok_cfg.data.height, tok_cfg.data.width));
-      if (frames.empty()) fail("{}: no frames", g->video);
+      auto frames = data::read_frames_at_rate(g->video, tok_cfg.data.world_fps, want_p, tok_cfg.data.height,
+                                              tok_cfg.data.width);
       p.tokens = tokenizer::encode_frames(tok, frames, dev).reshape({int64_t(frames.size()), -1}).to(torch::kCPU);
       if (p.tokens.size(1) != L.n) fail("the tokenizer gives {} tokens per frame, the world model takes {}", p.tokens.size(1), L.n);
       P = p.tokens.size(0);

@@ -9,6 +9,8 @@
 
 namespace gaia::app {
 
+std::string g_command_line = "gaia";
+
 void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help) {
   cmd->add_option("--config", f->config, "YAML config (configs/tiny.yaml, default.yaml, paper.yaml); default: built-in default");
   cmd->add_option("--set", f->sets, "override a config key, e.g. --set world.d_model=512 (repeatable)");

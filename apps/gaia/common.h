@@ -27,6 +27,9 @@ Config resolve_config(const SharedFlags& f);
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
 
+// The exact command line of this run (set by main), recorded in reports so that every figure can be remade.
+extern std::string g_command_line;
+
 // Registration of the subcommands (one file each).
 void register_plan(CLI::App& app);
 void register_demo(CLI::App& app);
@@ -40,5 +43,8 @@ void register_decoder(CLI::App& app);   // gaia decoder train|eval
 void register_decode(CLI::App& app);    // gaia decode
 void register_probe(CLI::App& app);     // gaia probe train|eval
 void register_convert(CLI::App& app);   // gaia convert --half
+void register_eval(CLI::App& app);      // gaia eval (action / text control, futures, long rollouts)
+void register_train_all(CLI::App& app); // gaia train-all (the whole recipe)
+void register_report(CLI::App& app);    // gaia report RUN_DIR
 
 }  // namespace gaia::app

@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   // FFmpeg's own log lines would break the "one clear error line" rule; our errors say what went wrong.
   ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);
   gaia::configure_allocator();
+  for (int i = 1; i < argc; ++i) gaia::app::g_command_line += std::string(" ") + argv[i];
   CLI::App app{"gaia: generative world model for autonomous driving (GAIA-1 in C++)", "gaia"};
   app.set_version_flag("--version", std::string("gaia ") + GAIA_VERSION);
   app.require_subcommand(1);
@@ -27,6 +28,9 @@ int main(int argc, char** argv) {
   gaia::app::register_decode(app);
   gaia::app::register_probe(app);
   gaia::app::register_convert(app);
+  gaia::app::register_eval(app);
+  gaia::app::register_train_all(app);
+  gaia::app::register_report(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -113,4 +113,16 @@ void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, doubl
   fs::rename(tmp, path);
 }
 
+std::vector<cv::Mat> read_frames_at_rate(const fs::path& path, double rate, int64_t count, int height, int width) {
+  VideoSource v(path);
+  const double fps = v.fps() > 0 ? v.fps() : 25.0;
+  const double every = fps / rate;
+  std::vector<cv::Mat> frames;
+  VideoFrame f;
+  for (int i = 0; v.next(&f) && int64_t(frames.size()) < count; ++i)
+    if (i == int(std::lround(double(frames.size()) * every))) frames.push_back(resize_center_crop(f.bgr, height, width));
+  if (frames.empty()) fail("{}: no frames", path.string());
+  return frames;
+}
+
 }  // namespace gaia::data

@@ -43,6 +43,10 @@ class VideoSource {
 // Scales so the image covers HxW, then crops the centre (keeps the aspect ratio; no letterboxing).
 cv::Mat resize_center_crop(const cv::Mat& bgr, int height, int width);
 
+// Up to `count` frames of a video subsampled to `rate` Hz (frame k is the source frame nearest k * fps / rate; a
+// file without a frame rate counts as 25 Hz), resized and centre-cropped: a video prompt at the world-model rate.
+std::vector<cv::Mat> read_frames_at_rate(const fs::path& path, double rate, int64_t count, int height, int width);
+
 // Writes a PNG atomically.
 void write_png(const fs::path& path, const cv::Mat& bgr);
 

@@ -49,6 +49,15 @@ torch::Tensor v_loss(const torch::Tensor& v_pred, const torch::Tensor& v_true, c
 torch::Tensor ddim_step(const torch::Tensor& xt, const torch::Tensor& v, const torch::Tensor& alpha_t,
                         const torch::Tensor& sigma_t, const torch::Tensor& alpha_s, const torch::Tensor& sigma_s);
 
+// What the diffusion runs on. With `cond_image` (the CPU default) the model is given the tokenizer decoder's coarse
+// frame of the tokens and diffuses the residual x - coarse, as a cascaded refiner would: at initialisation the
+// output is already the coarse frame, and training spends its steps on detail and temporal consistency. Frames
+// without tokens (context, interpolation, dropped tokens) have a zero coarse frame there and diffuse the frame
+// itself. Without cond_image (the paper's setting) the base is zero. -> the base to subtract, shaped like x.
+inline torch::Tensor coarse_base(const torch::Tensor& cond_image, const torch::Tensor& x) {
+  return cond_image.defined() ? cond_image : torch::zeros_like(x);
+}
+
 // The DDIM time grid: steps + 1 times from 1 down to 0, uniformly spaced.
 std::vector<double> ddim_times(int steps);
 

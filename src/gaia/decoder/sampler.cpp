@@ -24,7 +24,9 @@ torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
 
 torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const WindowInput& in, const SampleOptions& o) {
   torch::NoGradGuard ng;
-  const auto& x0 = in.frames;
+  // Diffusion runs on the residual over the coarse image (diffusion.h coarse_base); context frames are given as theirs.
+  const auto base = coarse_base(in.cond_image, in.frames);
+  const auto x0 = in.frames - base;
   const int64_t B = x0.size(0), T = x0.size(1);
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
@@ -48,7 +50,7 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
     return v;
   };
   z = ddim_loop(z, o.steps, sched, v_fn);
-  return (ctx * x0 + (1 - ctx) * z).clamp(-1, 1);
+  return (ctx * in.frames + (1 - ctx) * (z + base)).clamp(-1, 1);
 }
 
 std::vector<Window> backward_windows(int64_t N, int T) {

@@ -65,12 +65,13 @@ TaskBatch make_task_batch(const Clips& clips, const FrameMasks& masks, int rate,
   auto alpha = sched.alpha(time).view({B, T, 1, 1, 1}), sigma = sched.sigma(time).view({B, T, 1, 1, 1});
   auto eps = torch::randn_like(x);
   auto c5 = ctx.view({B, T, 1, 1, 1});
-  b.input.x = c5 * x + (1 - c5) * add_noise(x, eps, alpha, sigma);
+  const auto r = x - coarse_base(b.input.cond_image, x);  // what is diffused (the frame itself without cond_image)
+  b.input.x = c5 * r + (1 - c5) * add_noise(r, eps, alpha, sigma);
   b.input.context = ctx;
   b.input.time = time;
   b.input.rate = torch::full({B}, rate, torch::TensorOptions().dtype(torch::kLong).device(dev));
   b.input.temporal = masks.temporal;
-  b.v_true = v_target(x, eps, alpha, sigma);
+  b.v_true = v_target(r, eps, alpha, sigma);
   b.weight = 1 - ctx;
   return b;
 }
@@ -158,6 +159,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", optim.get()}},
                            {step, {{"config", cfg.name}}});
+    save_decoder(ema, cfg, opt.out / "latest.safetensors");  // usable EMA weights so far (gaia decode, decoder eval)
   };
   // Validation: v loss of the EMA weights on fixed held-out clips (video task, 6.25 Hz) at t' = 0.25, 0.5, 0.75
   // with fixed noise, and the PSNR of the one-step estimate x_hat at t' = 0.5.
@@ -175,7 +177,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
       if (t == 0.5) {
         auto tt = torch::full({1}, t);
-        psnr = psnr_pm1(x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)), clips.frames);
+        auto x_hat = x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)) + coarse_base(b.input.cond_image, clips.frames);
+        psnr = psnr_pm1(x_hat, clips.frames);
       }
     }
     v["loss"] = loss;

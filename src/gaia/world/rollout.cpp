@@ -15,14 +15,20 @@ struct Conditioner {
   bool guided;
   torch::Device dev;
 
-  torch::Tensor rows(const torch::Tensor& per_step, int64_t k0, int64_t k1, const torch::Tensor& uncond) const {
-    // per_step [P + F, ...] -> [B, k1 - k0, ...]; the uncond half uses `uncond` when defined, else a copy.
-    auto s = per_step.narrow(0, k0, k1 - k0).unsqueeze(0);
-    std::vector<int64_t> rep(static_cast<size_t>(s.dim()), 1);
-    rep[0] = N;
-    auto c = s.repeat(rep);
+  // per_step is [P + F, ...] shared by all futures, or [N, P + F, ...] one row per future (one more dimension than
+  // the shared form's `base_dims`) -> [B, k1 - k0, ...]; the uncond half uses `uncond` when defined, else a copy.
+  torch::Tensor rows(const torch::Tensor& per_step, int64_t base_dims, int64_t k0, int64_t k1,
+                     const torch::Tensor& uncond) const {
+    auto pick = [&](const torch::Tensor& t) {
+      if (t.dim() == base_dims + 1) return t.narrow(1, k0, k1 - k0);
+      auto s = t.narrow(0, k0, k1 - k0).unsqueeze(0);
+      std::vector<int64_t> rep(static_cast<size_t>(s.dim()), 1);
+      rep[0] = N;
+      return s.repeat(rep);
+    };
+    auto c = pick(per_step);
     if (!guided) return c.to(dev);
-    auto u = uncond.defined() ? uncond.narrow(0, k0, k1 - k0).unsqueeze(0).repeat(rep) : c;
+    auto u = uncond.defined() ? pick(uncond) : c;
     return torch::cat({c, u}, 0).to(dev);
   }
 
@@ -32,16 +38,16 @@ struct Conditioner {
     const int64_t B = guided ? 2 * N : N;
     auto cond_rows = torch::arange(B) < N;  // [B] true for the conditional half
     if (p.actions.defined()) {
-      b.actions = rows(p.actions, k0, k1, {});
+      b.actions = rows(p.actions, 2, k0, k1, {});
       b.use_action = cond_rows.to(dev);
     }
     const bool neg = p.negative_text_ids.defined() || p.negative_text_emb.defined();
     if (p.text_emb.defined() || p.negative_text_emb.defined()) {
       auto base = p.text_emb.defined() ? p.text_emb : torch::zeros_like(p.negative_text_emb);
-      b.text_emb = rows(base, k0, k1, p.negative_text_emb);
+      b.text_emb = rows(base, 3, k0, k1, p.negative_text_emb);
     } else if (p.text_ids.defined() || p.negative_text_ids.defined()) {
       auto base = p.text_ids.defined() ? p.text_ids : torch::zeros_like(p.negative_text_ids);
-      b.text_ids = rows(base, k0, k1, p.negative_text_ids);
+      b.text_ids = rows(base, 2, k0, k1, p.negative_text_ids);
     }
     if (b.text_emb.defined() || b.text_ids.defined()) {
       // cond rows see the prompt text (null if there is none); uncond rows the negative prompt (null if none).
@@ -52,28 +58,34 @@ struct Conditioner {
   }
 };
 
-void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t P, int64_t steps) {
+void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t N, int64_t P, int64_t steps) {
   const auto& L = m.layout;
   if (p.tokens.defined() && p.tokens.numel() > 0) {
-    if (p.tokens.dim() != 2 || p.tokens.size(1) != L.n)
-      fail("prompt tokens must be [frames, n = {}] (got {} dims, {} per frame)", L.n, p.tokens.dim(),
-           p.tokens.dim() == 2 ? p.tokens.size(1) : -1);
+    const bool per_future = p.tokens.dim() == 3;
+    if ((p.tokens.dim() != 2 && !per_future) || p.tokens.size(-1) != L.n || (per_future && p.tokens.size(0) != N))
+      fail("prompt tokens must be [frames, n = {}] or [futures = {}, frames, n] (got {} dims, {} per frame)", L.n, N,
+           p.tokens.dim(), p.tokens.size(-1));
     if (p.tokens.min().item<int64_t>() < 0 || p.tokens.max().item<int64_t>() >= m.K)
       fail("prompt tokens must be in [0, K = {}) (found {}..{})", m.K, p.tokens.min().item<int64_t>(),
            p.tokens.max().item<int64_t>());
   }
   if (P > L.T) fail("the prompt has {} frames but the context holds {} steps (world.context_steps)", P, L.T);
-  auto rows_ok = [&](const torch::Tensor& t, const char* what, int64_t width) {
+  // Shared [steps, width, ...] (base_dims dimensions) or per future [N, steps, width, ...].
+  auto rows_ok = [&](const torch::Tensor& t, const char* what, int64_t base_dims, int64_t width) {
     if (!t.defined()) return;
-    if (t.size(0) != steps || (width > 0 && t.size(1) != width))
-      fail("{} has {} rows of {} but the rollout needs {} rows (prompt + generated frames) of {}", what, t.size(0),
-           t.dim() > 1 ? t.size(1) : 0, steps, width);
+    const int64_t o = t.dim() == base_dims + 1 ? 1 : 0;
+    if (t.dim() != base_dims + o || (o && t.size(0) != N))
+      fail("{} must be [steps, ...] or [futures = {}, steps, ...] with {} dimensions per future (got {} dims)", what, N,
+           base_dims, t.dim());
+    if (t.size(o) != steps || (width > 0 && t.size(o + 1) != width))
+      fail("{} has {} rows of {} but the rollout needs {} rows (prompt + generated frames) of {}", what, t.size(o),
+           t.size(o + 1), steps, width);
   };
-  rows_ok(p.actions, "actions", 2);
-  rows_ok(p.text_ids, "text ids", L.m);
-  rows_ok(p.text_emb, "text embeddings", L.m);
-  rows_ok(p.negative_text_ids, "negative text ids", L.m);
-  rows_ok(p.negative_text_emb, "negative text embeddings", L.m);
+  rows_ok(p.actions, "actions", 2, 2);
+  rows_ok(p.text_ids, "text ids", 2, L.m);
+  rows_ok(p.text_emb, "text embeddings", 3, L.m);
+  rows_ok(p.negative_text_ids, "negative text ids", 2, L.m);
+  rows_ok(p.negative_text_emb, "negative text embeddings", 3, L.m);
 }
 
 }  // namespace
@@ -84,9 +96,10 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
   torch::NoGradGuard ng;
   model->eval();
   const auto& L = model->layout;
-  const int64_t P = prompt.tokens.defined() ? prompt.tokens.size(0) : 0, F = o.frames, steps = P + F;
+  const bool has_prompt = prompt.tokens.defined() && prompt.tokens.numel() > 0;
+  const int64_t P = has_prompt ? prompt.tokens.size(-2) : 0, F = o.frames, steps = P + F;
   if (F < 0 || o.futures < 1) fail("rollout needs frames >= 0 and futures >= 1 (got {} and {})", F, o.futures);
-  check_prompt(*model, prompt, P, steps);
+  check_prompt(*model, prompt, o.futures, P, steps);
   const torch::Device dev = model->token_embedding->weight.device();
   const int64_t N = o.futures;
   const bool guided = o.guidance.active();
@@ -95,7 +108,11 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
   auto gen = at::detail::createCPUGenerator(o.seed);
 
   auto all = torch::zeros({B, steps, n}, torch::TensorOptions().dtype(torch::kLong).device(dev));
-  if (P > 0) all.narrow(1, 0, P).copy_(prompt.tokens.to(dev).unsqueeze(0).expand({B, P, n}));
+  if (P > 0) {
+    auto pt = prompt.tokens.to(dev).to(torch::kLong);
+    if (pt.dim() == 3) all.narrow(1, 0, P).copy_(guided ? torch::cat({pt, pt}) : pt);  // one prompt per future
+    else all.narrow(1, 0, P).copy_(pt.unsqueeze(0).expand({B, P, n}));
+  }
   KVCache cache = model->make_cache(B, L.length());
   int64_t win = 0;      // steps in the cache; the current step sits at temporal position `win`
   int64_t first = 0;    // global index of the cache's first step

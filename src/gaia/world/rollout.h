@@ -12,6 +12,8 @@
 
 namespace gaia::world {
 
+// Every tensor is either shared by all futures (the shapes below) or given per future with a leading [N, ...]
+// dimension, so that one batched rollout can run many prompts and commands at once (evaluation does).
 struct RolloutPrompt {
   torch::Tensor tokens;             // [P, n] int64 prompt frames (undefined or P = 0: from scratch)
   // Conditioning for every step, prompt and generated (P + F rows each); undefined = none (null tokens).

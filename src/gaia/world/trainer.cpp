@@ -65,6 +65,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}},
                            {step, {{"config", cfg.name}}});
+    save_world(model, info, opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
   };
   auto validate = [&]() {
     nlohmann::json v;

@@ -1,0 +1,39 @@
+#pragma once
+// Action control (§5, Fig. 9 of the paper shows it in pictures): from held-out video prompts, roll out under
+// commanded speed / curvature sequences, in and out of the training distribution, and read back what the ego did
+// with the dynamics probe. Measured three ways:
+//   - agreement of commanded and read-back curvature and speed (Spearman over rollouts, steering sign accuracy);
+//   - the same rollouts without action conditioning (null actions), the baseline the conditioning must beat;
+//   - against the counterfactual replay of the procedural world under the same commands (per-frame PSNR of the
+//     decoded frames and FD-probe), when the raw dataset the tokens came from is given.
+#include "gaia/control/common.h"
+#include "gaia/data/episode.h"
+#include "gaia/world/sampling.h"
+
+namespace gaia::control {
+
+struct Command {
+  std::string name;
+  double speed = -1;      // m/s; < 0: hold the prompt's last speed
+  double curvature = 0;   // 1/m, + = left; held for every generated frame
+  double drift = 0;       // 1/m per generated frame added on top (a slow drift off the lane)
+  bool out_of_distribution = false;
+};
+// straight, left, right (in distribution: |curvature| <= 0.012 1/m covers 99% of synth frames), strong-left,
+// strong-right (0.03 1/m, beyond any recorded curvature), drift-right (a growing pull off the lane, which the
+// recorded driver never does), slow and fast (speed commands, straight).
+std::vector<Command> action_commands();
+
+struct ActionEvalOptions {
+  int prompts = 8;            // held-out video prompts
+  int prompt_frames = 3;      // P
+  int frames = 5;             // F generated frames per rollout
+  world::SamplingOptions sampling;
+  uint64_t seed = 0;
+};
+
+// raw: the procedural dataset the tokens were made from (counterfactual replay); nullptr skips that part.
+nlohmann::json action_control(Models& m, const world::TokenDataset& tokens, const data::Dataset* raw,
+                              const ActionEvalOptions& o, Output& out);
+
+}  // namespace gaia::control

@@ -1,0 +1,144 @@
+#include "gaia/control/common.h"
+
+#include <algorithm>
+
+#include <opencv2/imgproc.hpp>
+
+#include "gaia/core/error.h"
+#include "gaia/data/gif.h"
+#include "gaia/probe/trainer.h"
+#include "gaia/tokenizer/io.h"
+#include "gaia/world/batch.h"
+
+namespace gaia::control {
+
+Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
+                   const fs::path& scene_probe, const torch::Device& dev) {
+  Models m;
+  m.dev = dev;
+  m.world = world::load_world(world, dev, &m.info);
+  Config tc;
+  m.tok = tokenizer::load_tokenizer(tokenizer, dev, &tc);
+  const int64_t D = tc.tokenizer.downsample;
+  if (m.tok->height / D != m.info.grid_h || m.tok->width / D != m.info.grid_w || tc.tokenizer.codebook_size != m.info.K)
+    fail("{}: the tokenizer makes {}x{} tokens of K = {}, the world model {} takes {}x{} of K = {}", tokenizer.string(),
+         m.tok->height / D, m.tok->width / D, tc.tokenizer.codebook_size, world.string(), m.info.grid_h, m.info.grid_w,
+         m.info.K);
+  m.dynamics = probe::load_probe(dynamics_probe, dev);
+  if (m.dynamics->kind != probe::ProbeKind::kDynamics) fail("{}: not a dynamics probe", dynamics_probe.string());
+  m.scene = probe::load_probe(scene_probe, dev);
+  if (m.scene->kind != probe::ProbeKind::kScene) fail("{}: not a scene probe", scene_probe.string());
+  return m;
+}
+
+Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed) {
+  auto split = ds.split(0.1, seed);
+  auto ids = split.val_geofence;
+  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  const int64_t skip = int64_t(std::lround(ds.rate_hz() > 0 ? ds.rate_hz() : 6.25));  // the first second
+  std::vector<std::pair<size_t, int64_t>> pool;  // (episode, start): every held-out window, then spread
+  for (size_t e : ds.indices(ids))
+    for (int64_t s = skip; s + need <= ds.steps(e); s += frames) pool.push_back({e, s});
+  if (pool.empty())
+    fail("{}: no held-out episode has {} steps for a prompt (validation split of the token dataset)",
+         ds.path().string(), need + skip);
+  Prompts p;
+  const int64_t n = ds.tokens_per_step();
+  p.tokens = torch::zeros({count, frames, n}, torch::kLong);
+  p.actions = torch::zeros({count, frames, 2});
+  for (int i = 0; i < count; ++i) {
+    // Evenly over the pool, and over episodes first: pool order is episode by episode.
+    auto [e, s] = pool[(size_t(i) * pool.size()) / size_t(count)];
+    p.episodes.push_back(e);
+    p.starts.push_back(s);
+    auto ep = ds.episode(e);
+    for (int64_t k = 0; k < frames; ++k) {
+      for (int64_t j = 0; j < n; ++j) p.tokens[i][k][j] = int64_t(ep->tokens[size_t((s + k) * n + j)]);
+      p.actions[i][k][0] = ds.actions(e)[size_t(2 * (s + k))] / world::kSpeedScale;
+      p.actions[i][k][1] = ds.actions(e)[size_t(2 * (s + k) + 1)] / world::kCurvatureScale;
+    }
+  }
+  return p;
+}
+
+std::vector<std::vector<cv::Mat>> decode(Models& m, const torch::Tensor& tokens) {
+  const int64_t N = tokens.size(0), S = tokens.size(1);
+  auto grid = tokens.reshape({N * S, m.info.grid_h, m.info.grid_w}).to(torch::kLong);
+  auto frames = tokenizer::decode_tokens(m.tok, grid, m.dev);
+  std::vector<std::vector<cv::Mat>> out(static_cast<size_t>(N));
+  for (int64_t i = 0; i < N; ++i)
+    out[size_t(i)].assign(frames.begin() + i * S, frames.begin() + (i + 1) * S);
+  return out;
+}
+
+namespace {
+
+torch::Tensor run_probe(probe::ProbeNet& net, const std::vector<torch::Tensor>& inputs, const torch::Device& dev,
+                        torch::Tensor* features) {
+  torch::NoGradGuard ng;
+  net->eval();
+  std::vector<torch::Tensor> outs, feats;
+  for (size_t i = 0; i < inputs.size(); i += 64) {
+    auto x = torch::stack(std::vector<torch::Tensor>(inputs.begin() + long(i),
+                                                     inputs.begin() + long(std::min(inputs.size(), i + 64))))
+                 .to(dev);
+    auto f = net->features(x);
+    outs.push_back(net->head(f).cpu());
+    if (features) feats.push_back(f.cpu());
+  }
+  if (features) *features = torch::cat(feats);
+  return torch::cat(outs);
+}
+
+}  // namespace
+
+torch::Tensor read_dynamics(Models& m, const std::vector<cv::Mat>& frames) {
+  if (frames.size() < 2) fail("dynamics read-back needs at least two frames");
+  std::vector<torch::Tensor> in;
+  for (size_t k = 0; k + 1 < frames.size(); ++k) in.push_back(probe::probe_input({frames[k], frames[k + 1]}));
+  auto y = run_probe(m.dynamics, in, m.dev, nullptr);
+  y.select(1, 0).mul_(world::kSpeedScale);
+  y.select(1, 1).mul_(world::kCurvatureScale);
+  return y;
+}
+
+torch::Tensor read_scene(Models& m, const std::vector<cv::Mat>& frames, torch::Tensor* features) {
+  std::vector<torch::Tensor> in;
+  for (const auto& f : frames) in.push_back(probe::probe_input({f}));
+  auto logits = run_probe(m.scene, in, m.dev, features);
+  std::vector<torch::Tensor> ids;
+  for (auto& head : probe::split_scene_logits(logits)) ids.push_back(head.argmax(1));
+  return torch::stack(ids, 1);
+}
+
+std::vector<cv::Mat> tile(const std::vector<std::vector<cv::Mat>>& rows, const std::vector<std::string>& labels) {
+  std::vector<cv::Mat> out;
+  if (rows.empty()) return out;
+  size_t S = rows[0].size();
+  for (const auto& r : rows) S = std::min(S, r.size());
+  for (size_t k = 0; k < S; ++k) {
+    std::vector<cv::Mat> cols;
+    for (size_t i = 0; i < rows.size(); ++i) {
+      cv::Mat f = rows[i][k].clone();
+      if (i < labels.size() && !labels[i].empty())
+        cv::putText(f, labels[i], {3, 11}, cv::FONT_HERSHEY_PLAIN, 0.8, {255, 255, 255}, 1, cv::LINE_AA);
+      cols.push_back(f);
+    }
+    cv::Mat frame;
+    cv::hconcat(cols, frame);
+    out.push_back(frame);
+  }
+  return out;
+}
+
+void Output::gif(const std::string& rel, const std::vector<cv::Mat>& frames, double fps) const {
+  fs::create_directories((dir / rel).parent_path());
+  data::write_gif(dir / rel, frames, fps);
+}
+
+void Output::text(const std::string& rel, const std::string& content) const {
+  fs::create_directories((dir / rel).parent_path());
+  write_file_atomic(dir / rel, content);
+}
+
+}  // namespace gaia::control

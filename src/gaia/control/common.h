@@ -1,0 +1,65 @@
+#pragma once
+// What the paper shows in pictures (§5), measured: the world model is asked for something (a steering command, a
+// text prompt, several futures, a minute of driving), its tokens are decoded with the tokenizer's decoder, and
+// the evaluation probes read back what happened. This file holds what every measurement shares.
+//
+//   Models         the world model, the tokenizer that made its tokens, and the two probes
+//   Prompts        held-out video prompts (token episodes never trained on) with their recorded actions
+//   read_*         probe read-back of decoded frames: ego speed / curvature between frames, scene attributes
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <torch/torch.h>
+
+#include "gaia/probe/probe.h"
+#include "gaia/tokenizer/autoencoder.h"
+#include "gaia/world/io.h"
+#include "gaia/world/token_dataset.h"
+
+namespace gaia::control {
+
+struct Models {
+  world::WorldModel world{nullptr};
+  world::WorldInfo info;
+  tokenizer::ImageTokenizer tok{nullptr};
+  probe::ProbeNet dynamics{nullptr}, scene{nullptr};
+  torch::Device dev{torch::kCPU};
+};
+
+// Loads the four weight files; errors name the file (and say when the tokenizer's grid is not the world model's).
+Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
+                   const fs::path& scene_probe, const torch::Device& dev);
+
+// `count` held-out prompts (split seed = the world model's training seed) of `frames` steps (at least `need` steps left in the episode from the start), spread over
+// the token dataset's validation episodes; the start skips the first second of an episode.
+struct Prompts {
+  std::vector<size_t> episodes;  // token-dataset episode indices
+  std::vector<int64_t> starts;   // first prompt step in each
+  torch::Tensor tokens;          // [count, frames, n] int64
+  torch::Tensor actions;         // [count, frames, 2] normalised (world/batch.h), NaN where unknown
+};
+Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed);
+
+// Token rollouts [N, S, n] -> N sequences of S BGR frames through the tokenizer's decoder.
+std::vector<std::vector<cv::Mat>> decode(Models& m, const torch::Tensor& tokens);
+
+// Dynamics probe on consecutive frames (one world step apart) -> [S - 1, 2]: speed (m/s), curvature (1/m).
+torch::Tensor read_dynamics(Models& m, const std::vector<cv::Mat>& frames);
+// Scene probe -> class ids [S, 4] (weather, time of day, light, lead close) and optionally features [S, F].
+torch::Tensor read_scene(Models& m, const std::vector<cv::Mat>& frames, torch::Tensor* features = nullptr);
+
+// Frames side by side (each row one sequence, each column one step) for the report's videos: -> S frames.
+std::vector<cv::Mat> tile(const std::vector<std::vector<cv::Mat>>& rows, const std::vector<std::string>& labels);
+
+// Where a measurement writes its videos and plots, and what it adds to the report (report/report.h manifest).
+struct Output {
+  fs::path dir;                   // run directory
+  nlohmann::json sections = nlohmann::json::array();
+  std::string command;            // the command line that produced it
+  void gif(const std::string& rel, const std::vector<cv::Mat>& frames, double fps) const;  // dir / rel
+  void text(const std::string& rel, const std::string& content) const;
+};
+
+}  // namespace gaia::control

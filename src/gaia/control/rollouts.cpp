@@ -1,0 +1,179 @@
+#include "gaia/control/rollouts.h"
+
+#include <cmath>
+
+#include "gaia/core/error.h"
+#include "gaia/core/progress.h"
+#include "gaia/eval/svg_plot.h"
+#include "gaia/world/rollout.h"
+
+namespace gaia::control {
+
+double copy_rate(const torch::Tensor& frames) {
+  if (frames.size(0) < 2) return std::nan("");
+  return (frames.slice(0, 1) == frames.slice(0, 0, -1)).to(torch::kFloat64).mean().item<double>();
+}
+
+double unigram_entropy_bits(const torch::Tensor& frames, int64_t K) {
+  auto h = torch::bincount(frames.reshape({-1}).to(torch::kLong), {}, K).to(torch::kFloat64);
+  auto p = h / h.sum();
+  auto nz = p.masked_select(p > 0);
+  return -(nz * nz.log2()).sum().item<double>();
+}
+
+namespace {
+
+// Real held-out frames (decoded like the generated ones, so both pass through the same tokenizer decoder) and
+// their token windows: the reference for FD-probe and for the long-rollout statistics.
+struct RealReference {
+  torch::Tensor features;              // [N, F] scene-probe features of decoded real frames
+  std::vector<torch::Tensor> windows;  // token windows [W, n] of real episodes
+};
+
+RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t window, int max_frames, uint64_t seed) {
+  auto split = ds.split(0.1, seed);
+  auto ids = split.val_geofence;
+  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  RealReference r;
+  std::vector<torch::Tensor> picks;
+  const int64_t n = ds.tokens_per_step();
+  for (size_t e : ds.indices(ids)) {
+    auto ep = ds.episode(e);
+    auto all = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()), {ds.steps(e), n}, torch::kInt)
+                   .to(torch::kLong);
+    for (int64_t s = 0; s + window <= ds.steps(e); s += window) r.windows.push_back(all.narrow(0, s, window));
+    for (int64_t k = 0; k < ds.steps(e); k += 5) picks.push_back(all[k]);
+  }
+  if (picks.empty()) fail("{}: no held-out episodes for the real reference", ds.path().string());
+  std::vector<torch::Tensor> chosen;
+  for (int i = 0; i < max_frames && i < int(picks.size()); ++i)
+    chosen.push_back(picks[size_t(i) * picks.size() / size_t(std::min<int>(max_frames, int(picks.size())))]);
+  auto frames = decode(m, torch::stack(chosen).unsqueeze(0))[0];
+  read_scene(m, frames, &r.features);
+  return r;
+}
+
+torch::Tensor scene_features(Models& m, const std::vector<cv::Mat>& frames) {
+  torch::Tensor f;
+  read_scene(m, frames, &f);
+  return f;
+}
+
+}  // namespace
+
+nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out) {
+  const int64_t P = o.prompt_frames, F = o.frames, N = o.futures;
+  if (N < 2) fail("diversity needs at least two futures per prompt");
+  auto pr = held_out_prompts(ds, o.prompts, P, P + F, m.info.config.run.seed);
+  world::RolloutPrompt p;
+  p.tokens = pr.tokens.repeat_interleave(N, 0);
+  p.actions = torch::full({o.prompts * N, P + F, 2}, std::nan(""));  // the prompt's recorded actions, then none
+  p.actions.narrow(1, 0, P).copy_(pr.actions.repeat_interleave(N, 0));
+  world::RolloutOptions ro;
+  ro.frames = int(F);
+  ro.futures = int(o.prompts * N);
+  ro.sampling = o.sampling;
+  ro.seed = o.seed + 1;
+  auto r = world::rollout(m.world, p, ro);
+  auto gen = r.tokens.narrow(1, P, F);  // [prompts * N, F, n]
+  double dist = 0;
+  int pairs = 0;
+  for (int i = 0; i < o.prompts; ++i)
+    for (int64_t a = 0; a < N; ++a)
+      for (int64_t b = a + 1; b < N; ++b, ++pairs)
+        dist += (gen[i * N + a] != gen[i * N + b]).to(torch::kFloat64).mean().item<double>();
+  auto frames = decode(m, r.tokens);
+  std::vector<cv::Mat> generated;
+  for (auto& row : frames) generated.insert(generated.end(), row.begin() + P, row.end());
+  auto real = real_reference(m, ds, 1, 2 * int(generated.size()), m.info.config.run.seed);
+  const int64_t half = real.features.size(0) / 2;
+  nlohmann::json j = {
+      {"prompts", o.prompts}, {"futures", N}, {"frames", F},
+      {"mean_pairwise_token_distance", dist / pairs},
+      {"fd_probe_to_real", probe::frechet_distance(scene_features(m, generated), real.features)},
+      {"fd_probe_real_vs_real", probe::frechet_distance(real.features.slice(0, 0, half), real.features.slice(0, half))}};
+  std::vector<std::vector<cv::Mat>> rows(frames.begin(), frames.begin() + std::min<int64_t>(N, 3));
+  std::vector<std::string> labels;
+  for (size_t i = 0; i < rows.size(); ++i) labels.push_back(fmt::format("future {}", i + 1));
+  const double fps = ds.rate_hz() > 0 ? ds.rate_hz() : 6.25;
+  out.gif("videos/futures.gif", tile(rows, labels), fps / 2);
+  out.sections.push_back(
+      {{"title", "Multiple futures"},
+       {"text", fmt::format("{} futures from each of {} held-out prompts ({} prompt frames, {} generated, top-k "
+                            "sampling). FD-probe is a Frechet distance on the scene probe's features (not FVD).",
+                            N, o.prompts, P, F)},
+       {"videos", {{{"caption", "the same prompt, three sampled futures"},
+                    {"items", {{{"label", "futures"}, {"path", "videos/futures.gif"}}}}}}},
+       {"metrics", j}});
+  return j;
+}
+
+nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out) {
+  const double rate = ds.rate_hz() > 0 ? ds.rate_hz() : 6.25;
+  const int64_t P = o.prompt_frames, F = int64_t(std::lround(o.long_seconds * rate));
+  const int64_t W = int64_t(std::lround(o.window_seconds * rate));
+  if (F < W) fail("--long-seconds {} is shorter than one {} s window", o.long_seconds, o.window_seconds);
+  auto pr = held_out_prompts(ds, 1, P, P, m.info.config.run.seed);
+  world::RolloutPrompt p;
+  p.tokens = pr.tokens[0];
+  world::RolloutOptions ro;
+  ro.frames = int(F);
+  ro.sampling = o.sampling;
+  ro.seed = o.seed + 2;
+  ProgressBar bar(F, "long rollout");
+  auto r = world::rollout(m.world, p, ro, [&](int done, int) { bar.update(done); });
+  bar.finish();
+  auto gen = r.tokens[0].narrow(0, P, F);  // [F, n]
+  auto frames = decode(m, gen.unsqueeze(0))[0];
+  auto real = real_reference(m, ds, W, 256, m.info.config.run.seed);
+  if (real.windows.empty()) fail("{}: no held-out episode is {} s long (the statistics window)", ds.path().string(), o.window_seconds);
+  double real_copy = 0, real_entropy = 0;
+  for (auto& w : real.windows) {
+    real_copy += copy_rate(w) / double(real.windows.size());
+    real_entropy += unigram_entropy_bits(w, m.info.K) / double(real.windows.size());
+  }
+  nlohmann::json windows = nlohmann::json::array();
+  std::vector<double> xs;
+  eval::Series s_copy{"copy rate (generated)", {}, ""}, s_copy_real{"copy rate (real)", {}, ""};
+  eval::Series s_ent{"entropy / 10 bits (generated)", {}, ""}, s_ent_real{"entropy / 10 bits (real)", {}, ""};
+  double worst = 0;
+  for (int64_t s = 0; s + W <= F; s += W) {
+    auto w = gen.narrow(0, s, W);
+    const double c = copy_rate(w), e = unigram_entropy_bits(w, m.info.K);
+    const double fd = probe::frechet_distance(
+        scene_features(m, std::vector<cv::Mat>(frames.begin() + s, frames.begin() + s + W)), real.features);
+    windows.push_back({{"from_s", double(s) / rate}, {"copy_rate", c}, {"entropy_bits", e}, {"fd_probe_to_real", fd},
+                       {"copy_rate_vs_real", c / real_copy - 1}, {"entropy_vs_real", e / real_entropy - 1}});
+    worst = std::max({worst, std::abs(c / real_copy - 1), std::abs(e / real_entropy - 1)});
+    xs.push_back(double(s) / rate);
+    s_copy.y.push_back(c);
+    s_copy_real.y.push_back(real_copy);
+    s_ent.y.push_back(e / 10);
+    s_ent_real.y.push_back(real_entropy / 10);
+  }
+  nlohmann::json j = {{"seconds", o.long_seconds},
+                      {"frames", F},
+                      {"generated_frames_per_second", double(F) / r.seconds},
+                      {"real_copy_rate", real_copy},
+                      {"real_entropy_bits", real_entropy},
+                      {"windows", windows},
+                      {"max_relative_difference", worst},
+                      {"within_10_percent", worst <= 0.10}};
+  out.text("plots/long_rollout.svg", eval::svg_lines("token statistics per window of a long rollout", xs,
+                                                     {s_copy, s_copy_real, s_ent, s_ent_real}, "seconds", ""));
+  std::vector<cv::Mat> every;  // every other frame, played at half speed: the minute in 30 s
+  for (size_t k = 0; k < frames.size(); k += 2) every.push_back(frames[k]);
+  out.gif("videos/long_rollout.gif", every, rate / 2);
+  out.sections.push_back(
+      {{"title", "Long rollout"},
+       {"text", fmt::format("{} s generated from a {}-frame prompt with the sliding window (context {} steps); "
+                            "statistics per {} s window against real held-out token episodes.",
+                            o.long_seconds, P, m.info.config.world.context_steps, o.window_seconds)},
+       {"videos", {{{"caption", "a minute of driving (every other frame)"},
+                    {"items", {{{"label", "long rollout"}, {"path", "videos/long_rollout.gif"}}}}}}},
+       {"plots", {{{"caption", "copy rate and unigram entropy per window"}, {"path", "plots/long_rollout.svg"}}}},
+       {"metrics", j}});
+  return j;
+}
+
+}  // namespace gaia::control

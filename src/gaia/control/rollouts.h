@@ -1,0 +1,29 @@
+#pragma once
+// Multiple futures and long rollouts (§5 of the paper shows both as videos):
+//   futures   N futures from one held-out prompt: how different they are (mean pairwise token distance) while
+//             staying plausible (FD-probe of their frames to real held-out frames, with real-vs-real as the floor)
+//   long      a minute of driving with the sliding window: per 10 s window, the copy rate (tokens equal to the
+//             previous frame's at the same position), the unigram entropy of the tokens and FD-probe to real
+//             frames, against the same statistics of real held-out token episodes: no collapse into repetition
+#include "gaia/control/common.h"
+#include "gaia/world/sampling.h"
+
+namespace gaia::control {
+
+struct RolloutEvalOptions {
+  int prompts = 8, prompt_frames = 3, frames = 5, futures = 4;
+  double long_seconds = 60;     // 0 skips the long rollout
+  double window_seconds = 10;
+  world::SamplingOptions sampling;
+  uint64_t seed = 0;
+};
+
+// Statistics of token frames [S, n] (exposed for tests): mean fraction of tokens equal to the previous frame's,
+// and the entropy (bits) of the token histogram.
+double copy_rate(const torch::Tensor& frames);
+double unigram_entropy_bits(const torch::Tensor& frames, int64_t K);
+
+nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out);
+nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out);
+
+}  // namespace gaia::control
