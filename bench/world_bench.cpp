@@ -64,6 +64,23 @@ static void BM_RolloutCached(benchmark::State& st) {
 }
 BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the
+// per-token dispatch cost is shared. Counter: generated frames per second summed over the futures.
+static void BM_RolloutBatched(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  RolloutPrompt p;
+  const int64_t P = c.world.context_steps - 1, F = 1, N = st.range(0);
+  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.futures = int(N);
+  for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
+  st.counters["frames/s"] = benchmark::Counter(double(F * N) * st.iterations(), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_RolloutBatched)->Arg(4)->Arg(16)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // The naive baseline: every new token runs the whole sequence so far through the transformer again.
 static void BM_RolloutRecompute(benchmark::State& st) {
   Config c = bench_config();

@@ -3,7 +3,11 @@
 
 #include <torch/torch.h>
 
+#include <array>
+#include <cstdio>
+
 #include "gaia/control/rollouts.h"
+#include "gaia/eval/svg_plot.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -17,4 +21,21 @@ TEST(ControlStats, CopyRateAndEntropyOfKnownFrames) {
   EXPECT_DOUBLE_EQ(control::copy_rate(f[0].unsqueeze(0).repeat({5, 1})), 1.0);
   EXPECT_NEAR(control::unigram_entropy_bits(f[0].unsqueeze(0), 16), 2.0, 1e-12);
   EXPECT_NEAR(control::unigram_entropy_bits(torch::full({2, 4}, 7, torch::kLong), 16), 0.0, 1e-12);
+}
+
+// Bar charts with negative values (a right turn's curvature): bars of +v and -v have the same height and meet at
+// the zero line, one above it and one below.
+TEST(SvgPlot, BarsHangBelowZeroForNegativeValues) {
+  auto svg = eval::svg_bars("t", {"left", "right"}, {{"s", {2.0, -2.0}, "#123456"}}, 400, 200);
+  std::vector<std::array<double, 2>> rects;  // (y, height)
+  for (size_t at = svg.find("<rect x="); at != std::string::npos; at = svg.find("<rect x=", at + 1)) {
+    double x, y, wd, ht;
+    if (std::sscanf(svg.c_str() + at, "<rect x=\"%lf\" y=\"%lf\" width=\"%lf\" height=\"%lf\" fill=\"#123456\"", &x,
+                    &y, &wd, &ht) == 4)
+      rects.push_back({y, ht});
+  }
+  ASSERT_EQ(rects.size(), 3u);  // two bars and the legend swatch
+  EXPECT_NEAR(rects[0][1], rects[1][1], 1e-6);
+  EXPECT_GT(rects[0][1], 10.0);
+  EXPECT_NEAR(rects[0][0] + rects[0][1], rects[1][0], 0.11);  // the positive bar ends where the negative one starts
 }

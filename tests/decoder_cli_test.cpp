@@ -53,7 +53,7 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
     ASSERT_TRUE(torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)))) << n;
   // metrics.jsonl has a validation entry with a loss.
   auto lines = read_file(p.dir / "straight" / "metrics.jsonl");
-  EXPECT_NE(lines.find("\"psnr_x0_t0.5\""), std::string::npos);
+  EXPECT_NE(lines.find("\"x0_psnr\""), std::string::npos);
 
   // Decode 5 token frames of a rollout-shaped file with 2 futures to 25 Hz: 4 * 5 - 3 = 17 frames.
   auto tokens = torch::randint(0, 256, {2, 5, 4, 8}, torch::kInt);

@@ -98,7 +98,7 @@ void register_decoder(CLI::App& app) {
             if (!bar) bar = std::make_unique<ProgressBar>(l.total, "decoder");
             std::string info = fmt::format("loss {:.4f} {:.1f} s/step {}", l.loss, l.seconds, l.task);
             if (l.validation && !l.val.empty())
-              info += fmt::format(" | val {:.4f} x0 PSNR {:.1f} dB", l.val.value("loss", 0.0), l.val.value("psnr_x0_t0.5", 0.0));
+              info += fmt::format(" | val {:.4f} x0 PSNR {:.1f} dB", l.val.value("loss", 0.0), l.val.value("x0_psnr", 0.0));
             bar->update(l.step, info);
           },
           [](const std::string& n) { std::fprintf(stderr, "decoder: %s\n", n.c_str()); });

@@ -23,6 +23,7 @@ struct EvalFlags {
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4;
   double long_seconds = 60, window_seconds = 10;
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0};
+  std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
 };
 
 }  // namespace
@@ -46,6 +47,10 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--scales", e->scales, "guidance scales for text control");
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
+  cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")
+      ->take_all();
+  cmd->add_option("--plot", e->plots, "an extra SVG plot for the report (e.g. the balance.svg of gaia data stats)")
+      ->take_all();
   cmd->add_option("--world-eval", e->world_eval, "a `gaia world eval` output directory to include in the report");
   add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)");
   cmd->callback([=] {
@@ -131,6 +136,32 @@ void register_eval(CLI::App& app) {
         sec["plots"] = {{{"caption", "perplexity by token position (Fig. 5)"}, {"path", "plots/perplexity_by_position.svg"}}};
       }
       out.sections.insert(out.sections.begin(), sec);
+    }
+    if (!e->metrics.empty() || !e->plots.empty()) {
+      // Training curves and data plots, copied in so that the run directory stays self-contained.
+      nlohmann::json curves = nlohmann::json::array(), plots = nlohmann::json::array();
+      for (const auto& kv : e->metrics) {
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos) fail("--metrics: expected NAME=FILE, got '{}'", kv);
+        const std::string name = kv.substr(0, eq), rel = "curves/" + name + ".jsonl";
+        const std::string text = read_file(kv.substr(eq + 1));
+        out.text(rel, text);
+        // The loss, and whichever validation figures this trainer writes (train/step_loop.h metrics.jsonl).
+        nlohmann::json keys = {text.find("\"losses\":") != std::string::npos ? "losses.loss" : "loss"};
+        if (text.find("\"val\":{\"loss\":") != std::string::npos) keys.push_back("val.loss");
+        for (const char* k : {"bits_per_token", "x0_psnr", "psnr"})
+          if (text.find(fmt::format("\"{}\":", k)) != std::string::npos) keys.push_back(fmt::format("val.{}", k));
+        curves.push_back({{"caption", name}, {"path", rel}, {"keys", keys}});
+      }
+      for (const auto& p : e->plots) {
+        const std::string rel = "plots/extra-" + fs::path(p).filename().string();
+        out.text(rel, read_file(p));
+        plots.push_back({{"caption", fs::path(p).filename().string()}, {"path", rel}});
+      }
+      nlohmann::json sec = {{"title", "Training"}, {"text", "Loss curves of the training runs and data statistics."}};
+      if (!curves.empty()) sec["curves"] = curves;
+      if (!plots.empty()) sec["plots"] = plots;
+      out.sections.push_back(sec);
     }
     for (auto& s : out.sections) s["commands"] = {g_command_line};
     write_file_atomic(out.dir / "eval.json", j.dump(2) + "\n");

@@ -118,7 +118,11 @@ void register_train_all(CLI::App& app) {
                         with({"eval", tokens, "--world", world, "--tokenizer", tok, "--dataset", synth,
                               "--dynamics-probe", (out / "probe-dynamics" / "probe-dynamics.safetensors").string(),
                               "--scene-probe", (out / "probe-scene" / "probe-scene.safetensors").string(),
-                              "--world-eval", (out / "world-eval").string(), "--out", (out / "eval").string()}),
+                              "--world-eval", (out / "world-eval").string(), "--metrics",
+                              "world=" + (out / "world" / "metrics.jsonl").string(),
+                              "decoder=" + (out / "decoder" / "metrics.jsonl").string(),
+                              "tokenizer=" + (out / "tokenizer" / "metrics.jsonl").string(), "--out",
+                              (out / "eval").string()}),
                         out / "eval" / "report.html"});
     }
     if (!ship->empty()) {

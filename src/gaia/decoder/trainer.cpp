@@ -155,7 +155,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
   fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
+  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", optim.get()}},
                            {step, {{"config", cfg.name}}});
@@ -182,7 +182,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       }
     }
     v["loss"] = loss;
-    v["psnr_x0_t0.5"] = psnr;
+    v["x0_psnr"] = psnr;  // PSNR of the one-step estimate of x0 at t = 0.5
     return v;
   };
 

@@ -59,20 +59,25 @@ std::string xml_escape(const std::string& s) {
 
 std::string svg_bars(const std::string& title, const std::vector<std::string>& cats, const std::vector<Series>& series,
                      int w, int h) {
-  double ymax = 0;
-  for (auto& s : series) for (double v : s.y) if (std::isfinite(v)) ymax = std::max(ymax, v);
-  if (ymax <= 0) ymax = 1;
-  std::string out = header(w, h, title) + y_axis(0, ymax, w, h);
+  // The axis always contains 0; negative values (e.g. a right turn's curvature) hang below the zero line.
+  double ymin = 0, ymax = 0;
+  for (auto& s : series)
+    for (double v : s.y)
+      if (std::isfinite(v)) ymin = std::min(ymin, v), ymax = std::max(ymax, v);
+  if (ymax - ymin <= 0) ymax = 1;
+  std::string out = header(w, h, title) + y_axis(ymin, ymax, w, h);
   const double plot_w = w - kLeft - kRight, plot_h = h - kTop - kBottom;
+  const double zero_y = h - kBottom - plot_h * (0 - ymin) / (ymax - ymin);
   const double group = cats.empty() ? plot_w : plot_w / static_cast<double>(cats.size());
   const double bar = group * 0.8 / std::max<size_t>(1, series.size());
   for (size_t c = 0; c < cats.size(); ++c) {
     double gx = kLeft + group * static_cast<double>(c) + group * 0.1;
     for (size_t s = 0; s < series.size(); ++s) {
       double v = c < series[s].y.size() && std::isfinite(series[s].y[c]) ? series[s].y[c] : 0;
-      double bh = plot_h * v / ymax;
+      double bh = plot_h * std::abs(v) / (ymax - ymin);
       out += fmt::format("<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" fill=\"{}\"/>\n",
-                         gx + bar * static_cast<double>(s), h - kBottom - bh, bar, bh, color_of(series[s], s));
+                         gx + bar * static_cast<double>(s), v >= 0 ? zero_y - bh : zero_y, bar, bh,
+                         color_of(series[s], s));
     }
     double lx = gx + group * 0.4, ly = h - kBottom + 12;
     out += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"end\" transform=\"rotate(-35 {:.1f} {:.1f})\">{}</text>\n",

@@ -191,7 +191,7 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     if (on_note) on_note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
   fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", opt.steps, cfg.run.checkpoint_every, opt.stop_after);
+  train::StepLoop loop(opt.out / "metrics.jsonl", step, opt.steps, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&] { train::save_checkpoint(ckpt, {{"probe", net.ptr().get()}}, {{"probe", optim.get()}}, {step, {}}); };
   auto validate = [&] {
     nlohmann::json v;

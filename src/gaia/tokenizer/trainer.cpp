@@ -114,7 +114,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     note("initialised from " + opt.init.string());
   }
   fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
+  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
 
   auto save = [&]() {
     nlohmann::json extra = {{"usage", usage}, {"config", cfg.name}};

@@ -1,7 +1,8 @@
 #pragma once
 // The end of a training step, the same for the tokenizer, world model and video decoder trainers: append the step's
 // record to metrics.jsonl (flushed, so a killed run keeps its curve), checkpoint when due, and say whether this run
-// stops here (--stop-after, or the last step).
+// stops here (--stop-after, or the last step). A resumed run first drops the records after its checkpoint's step
+// (the steps an interrupted run did past its last checkpoint are done again), so the curve has each step once.
 #include <fstream>
 #include <functional>
 
@@ -13,7 +14,8 @@ namespace gaia::train {
 
 class StepLoop {
  public:
-  StepLoop(const fs::path& metrics_jsonl, int total, int checkpoint_every, int stop_after);
+  // start_step: the step the run starts (or resumes) from; records of later steps are removed from the file.
+  StepLoop(const fs::path& metrics_jsonl, int start_step, int total, int checkpoint_every, int stop_after);
   bool validate_now(int step, int val_every) const { return (val_every > 0 && step % val_every == 0) || step == total_; }
   // After step `step` (1-based count of finished steps): logs, saves if due; true = stop this run.
   bool end_step(int step, const nlohmann::json& record, const std::function<void()>& save);

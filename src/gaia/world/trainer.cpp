@@ -61,7 +61,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   }
   fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", total, cfg.run.checkpoint_every, opt.stop_after);
+  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {
     train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}},
                            {step, {{"config", cfg.name}}});

@@ -1,0 +1,30 @@
+// train::StepLoop: a resumed run's metrics.jsonl keeps each step once (the steps an interrupted run did past its
+// last checkpoint are trained again and logged again), and a torn last line of a killed run is dropped.
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/train/step_loop.h"
+#include "test_util.h"
+
+using namespace gaia;
+
+TEST(StepLoop, ResumeDropsRecordsPastTheCheckpoint) {
+  test::TempDir d;
+  const fs::path f = d / "metrics.jsonl";
+  write_file_atomic(f, "{\"step\":1}\n{\"step\":2}\n{\"step\":3}\n{\"step\":4}\n{\"step\":5}\n{\"step\":6,\"lo");
+  {
+    train::StepLoop loop(f, 3, 10, 0, -1);  // resumed at step 3 of 10
+    int saves = 0;
+    for (int s = 4; s <= 10; ++s) loop.end_step(s, {{"step", s}}, [&] { ++saves; });
+    EXPECT_EQ(saves, 1);  // only the last step (checkpoint_every 0)
+  }
+  std::ifstream in(f);
+  std::string line;
+  int expect = 1;
+  while (std::getline(in, line)) EXPECT_EQ(nlohmann::json::parse(line)["step"].get<int>(), expect++) << line;
+  EXPECT_EQ(expect, 11);
+  // A fresh run (step 0) in a directory with an old curve starts a new one.
+  { train::StepLoop fresh(f, 0, 5, 0, -1); }
+  EXPECT_EQ(read_file(f), "");
+}
