@@ -100,7 +100,7 @@ TEST(ShippedModels, DemoRunsWithTheShippedModels) {
   EXPECT_EQ(videos, 2 + 2 + 1 + 1 + (fs::exists(model("decoder.safetensors")) ? 2 : 1));
   EXPECT_EQ(html.find("src=\"http"), std::string::npos);
 
-  const fs::path clip = test::source_dir().parent_path() / "shared" / "data" / "real" / "highway-sunny-720p25.mp4";
+  const fs::path clip = test::real_data_dir() / "highway-sunny-720p25.mp4";
   if (!fs::exists(clip)) return;  // the real clips live beside the repository, not in it
   r = test::run_gaia("demo" + small + " --video " + q(clip) + " --out " + q(d / "real"));
   ASSERT_EQ(r.status, 0) << r.output;

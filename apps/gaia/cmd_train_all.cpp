@@ -62,10 +62,22 @@ void register_train_all(CLI::App& app) {
   auto seconds = std::make_shared<double>(30);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
+  // Steps of each stage: the recipe that made the shipped models (MODEL_CARD.md). The world model and the decoder
+  // ran 3/4 of their config's steps (2400 and 600) to fit a working session on 2 cores.
+  struct Steps {
+    int tokenizer = 0, finetune = 1000, world = 1800, decoder = 450, probe_scene = 1500, probe_dynamics = 2000;
+  };
+  auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
   cmd->add_option("--seconds", *seconds, "seconds per episode (recipe: 30)");
   cmd->add_option("--ship", *ship, "also write fp16 copies of the final weights into this directory (e.g. models)");
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
+  cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
+  cmd->add_option("--finetune-steps", st->finetune, "tokenizer fine-tune steps without the GAN term");
+  cmd->add_option("--world-steps", st->world, "world model steps");
+  cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
+  cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
+  cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
   add_shared_flags(cmd, flags.get(), "run directory (one folder per stage; default: runs/default)");
   cmd->callback([=] {
     Config c = resolve_config(*flags);  // validates --config / --set before hours of work start
@@ -87,24 +99,25 @@ void register_train_all(CLI::App& app) {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
          out / "synth" / ".complete"},
-        {"tokenizer", with({"tokenizer", "train", synth, "--out", (out / "tokenizer").string()}),
+        {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
+                            "--out", (out / "tokenizer").string()}),
          out / "tokenizer" / "tokenizer.safetensors"},
         {"tokenizer-ft",
          with({"tokenizer", "train", synth, "--init", (out / "tokenizer" / "tokenizer.safetensors").string(), "--steps",
-               "1000", "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=1e-4", "--set",
+               std::to_string(st->finetune), "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=1e-4", "--set",
                "tokenizer.warmup_steps=50", "--set", "tokenizer.final_lr=1e-5", "--out", (out / "tokenizer-ft").string()}),
          tok},
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--out", tokens}), out / "tokens" / "dataset.json"},
-        // The shipped world model and decoder were trained for 1800 and 450 steps (3/4 of the config's 2400 and 600)
-        // to fit a working session on 2 cores; the recipe records what was run (MODEL_CARD.md).
-        {"world", with({"world", "train", tokens, "--steps", "1800", "--out", (out / "world").string()}), world},
+        {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
+         world},
         {"decoder",
-         with({"decoder", "train", synth, "--tokenizer", tok, "--steps", "450", "--out", (out / "decoder").string()}),
+         with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
+               (out / "decoder").string()}),
          decoder},
-        {"probe-scene", with({"probe", "train", "scene", synth, "--steps", "1500", "--out", (out / "probe-scene").string()}),
+        {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--out", (out / "probe-scene").string()}),
          out / "probe-scene" / "probe-scene.safetensors"},
         {"probe-dynamics",
-         with({"probe", "train", "dynamics", synth, "--steps", "2000", "--out", (out / "probe-dynamics").string()}),
+         with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
          out / "probe-dynamics" / "probe-dynamics.safetensors"},
     };
     if (!*skip_eval) {

@@ -1,0 +1,49 @@
+// gaia train-all on the tiny config with a handful of steps per stage: every stage runs as its own gaia process,
+// the fp16 copies land in --ship, and a second run finds every stage done and skips it (resumable recipe).
+#include <nlohmann/json.hpp>
+
+#include "gaia/core/safetensors.h"
+#include "test_util.h"
+
+using namespace gaia;
+
+namespace {
+std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+int count(const std::string& s, const std::string& what) {
+  int n = 0;
+  for (size_t at = s.find(what); at != std::string::npos; at = s.find(what, at + 1)) ++n;
+  return n;
+}
+}  // namespace
+
+TEST(TrainAll, RunsEveryStageShipsAndResumes) {
+  test::TempDir d;
+  const std::string cmd = "train-all --config " + q(test::source_dir() / "configs" / "tiny.yaml") +
+                          " --threads 2 --episodes 3 --seconds 3 --tokenizer-steps 6 --finetune-steps 3"
+                          " --world-steps 4 --decoder-steps 2 --probe-steps 3 --dynamics-probe-steps 3 --skip-eval" +
+                          " --ship " + q(d / "models") + " --out " + q(d / "runs");
+  auto r = test::run_gaia(cmd);
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors", "probe-scene.safetensors",
+                        "probe-dynamics.safetensors"}) {
+    ASSERT_TRUE(fs::exists(d / "models" / f)) << f;
+    SafetensorsFile st(d / "models" / f);
+    int f16 = 0, f32 = 0;
+    for (const auto& n : st.names()) f16 += st.get(n).dtype == DType::F16, f32 += st.get(n).dtype == DType::F32;
+    EXPECT_GT(f16, 0) << f;  // shipped as fp16
+    EXPECT_EQ(f32, 0) << f;
+  }
+  auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
+  ASSERT_EQ(log.size(), 8u + 5u);  // 8 training stages + 5 ship copies
+  EXPECT_NE(log[4]["command"].get<std::string>().find("world train"), std::string::npos);
+  EXPECT_NE(log[4]["command"].get<std::string>().find("--steps 4"), std::string::npos);
+  // Again: nothing left to do.
+  r = test::run_gaia(cmd);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 13) << r.output;
+  // A bad config key fails before any stage starts, naming the key.
+  r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("world.bogus"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "x"));
+}
