@@ -47,7 +47,7 @@ static void BM_WorldTrainStep(benchmark::State& st) {
   }
   st.counters["tokens/s"] = benchmark::Counter(double(B * m->layout.length()) * st.iterations(), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_WorldTrainStep)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_WorldTrainStep)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Frames generated per second after a prompt of T - 1 frames (the context is full for the generated frame).
 static void BM_RolloutCached(benchmark::State& st) {

@@ -1,4 +1,4 @@
-// gaia synth / gaia synth replay / gaia demo through the binary: determinism across thread counts, replay files,
+// gaia synth / gaia synth replay through the binary: determinism across thread counts, replay files,
 // and clear errors.
 #include "gaia/data/episode.h"
 #include "test_util.h"
@@ -45,16 +45,4 @@ TEST(SynthCli, ReplayWritesAnEpisodeAndRejectsBadActions) {
   auto w = test::run_gaia("synth --weather hail --out '" + (dir / "x").string() + "'");
   EXPECT_NE(w.status, 0);
   EXPECT_NE(w.output.find("hail"), std::string::npos) << w.output;
-}
-
-TEST(SynthCli, DemoProducesDataVideosAndReplay) {
-  test::TempDir dir;
-  auto r = test::run_gaia("demo --episodes 2 --seconds 3 --out '" + (dir / "demo").string() + "'");
-  ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_NE(r.output.find("sequence length"), std::string::npos) << r.output;  // the plan is printed first
-  for (auto f : {"contact_sheet.png", "episode0.mp4", "replay_steer_left.mp4"}) {
-    ASSERT_TRUE(fs::exists(dir / "demo" / f)) << f;
-    EXPECT_GT(fs::file_size(dir / "demo" / f), 1000u) << f;
-  }
-  EXPECT_EQ(data::Dataset(dir / "demo" / "synth").size(), 2u);
 }

@@ -33,8 +33,8 @@ Modes:
       positions = full head gathered by hand, causality, loss = manual mean NLL, strict reload reproduces logits).
   --bench [--threads N] [--repeats R]
       time one AdamW training step (zero_grad, forward, loss, backward, step) of the default-config world model
-      (config.h WorldConfig defaults: d_model 256, n_layers 6, n_heads 8, context_steps 8, text_tokens 16,
-      text_dim 128, text_vocab 2048; n = 144, K = 1024) at batch 8 with random tokens, actions and text ids, the
+      (config.h WorldConfig defaults: d_model 192, n_layers 4, n_heads 6, context_steps 8, text_tokens 16,
+      text_dim 128, text_vocab 2048; n = 144, K = 1024) at the default batch 4 with random tokens, actions and text ids, the
       same case as bench/world_bench.cpp BM_WorldTrainStep (AdamW lr 1e-4, betas (0.9, 0.95), weight decay 0.1 on
       tensors with dim >= 2 and 0 on the rest, as train::make_adamw; no gradient clipping; use_action / use_text
       left unset = all true, as the C++ bench). Prints training tokens/s = B * T * S / median step time (median of
@@ -63,7 +63,7 @@ import safetensors_py  # noqa: E402  (tools/safetensors_py.py)
 
 # WorldConfig defaults from src/gaia/core/config.h; n and K from the default data/tokenizer config
 # (72x128 frames, D = 8 -> 9 x 16 = 144 tokens; codebook_size 1024).
-DEFAULT_WORLD = {"d_model": 256, "n_layers": 6, "n_heads": 8, "context_steps": 8, "text_tokens": 16,
+DEFAULT_WORLD = {"d_model": 192, "n_layers": 4, "n_heads": 6, "context_steps": 8, "text_tokens": 16,
                  "text_dim": 128, "text_vocab": 2048, "action_tokens": 2}
 DEFAULT_N, DEFAULT_K = 144, 1024
 # configs/tiny.yaml world section (the rest from the defaults).
@@ -353,7 +353,7 @@ def run_bench(args):
     model = WorldModel({}, DEFAULT_N, DEFAULT_K)
     model.train()
     opt = make_adamw(model)
-    B, T = 8, model.T
+    B, T = 4, model.T  # WorldConfig batch_size
     tokens = torch.randint(0, DEFAULT_K, (B, T, DEFAULT_N), dtype=torch.long)
     actions = torch.randn(B, T, 2)
     text_ids = torch.randint(0, model.cfg["text_vocab"], (B, T, model.m), dtype=torch.long)
