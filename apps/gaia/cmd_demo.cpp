@@ -90,8 +90,9 @@ void register_demo(CLI::App& app) {
       return p;
     };
     auto dev = parse_device(c.run.device);
-    auto m = control::load_models(need("world.safetensors"), need("tokenizer.safetensors"),
-                                  need("probe-dynamics.safetensors"), need("probe-scene.safetensors"), dev);
+    const fs::path world_w = need("world.safetensors"), tok_w = need("tokenizer.safetensors");  // checked in order
+    const fs::path dyn_w = need("probe-dynamics.safetensors"), scene_w = need("probe-scene.safetensors");
+    auto m = control::load_models(world_w, tok_w, dyn_w, scene_w, dev);
     const fs::path decoder_w = models / "decoder.safetensors";
     const auto& wc = m.info.config;
     const int64_t P = d->prompt_frames, F = d->frames;
@@ -300,7 +301,9 @@ void register_demo(CLI::App& app) {
                                      {"items", {{{"label", "scene"}, {"path", "videos/unconditional.gif"}}}}}}}});
     sections.push_back({{"title", "Decoders"},
                         {"text", fmt::format("The first future through the video diffusion decoder ({:.0f} s on this "
-                                             "machine) and through the tokenizer's frame-by-frame decoder.",
+                                             "machine) and through the tokenizer's frame-by-frame decoder. The shipped "
+                                             "video decoder is undertrained (450 CPU steps): its frames are noisier "
+                                             "than the tokenizer decoder's (models/MODEL_CARD.md has the numbers).",
                                              dec_seconds)},
                         {"videos", {{{"caption", "video decoder | tokenizer decoder"}, {"items", dec_items}}}}});
     nlohmann::json manifest = {

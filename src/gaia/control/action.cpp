@@ -106,6 +106,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     cmd_curv[size_t(r)] = sc / double(F);
   }
   world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on
+  null_actions.actions = cond.actions.clone();  // (a struct copy shares the tensors' storage)
   null_actions.actions.narrow(1, P - 1, F + 1).fill_(std::nan(""));
 
   world::RolloutOptions ro;
