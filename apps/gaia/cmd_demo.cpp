@@ -5,7 +5,6 @@
 // the whole training recipe (`gaia train-all`) and uses what it made.
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 
 #include <opencv2/imgproc.hpp>
 
@@ -77,10 +76,9 @@ void register_demo(CLI::App& app) {
     if (d->from_scratch) {
       // The recipe as a child process, so its stages resume exactly as `gaia train-all` would.
       models = out / "models";
-      std::string cmdline = "\"" + fs::read_symlink("/proc/self/exe").string() + "\" train-all --ship \"" +
-                            models.string() + "\" --out \"" + (out / "runs").string() + "\"";
-      if (!flags->config.empty()) cmdline += " --config \"" + flags->config + "\"";
-      if (std::system(cmdline.c_str()) != 0) fail("gaia demo --from-scratch: the training recipe failed (see above)");
+      std::vector<std::string> args{"train-all", "--ship", models.string(), "--out", (out / "runs").string()};
+      if (!flags->config.empty()) args.insert(args.end(), {"--config", flags->config});
+      if (run_gaia_child(args) != 0) fail("gaia demo --from-scratch: the training recipe failed (see above)");
     }
     auto need = [&](const char* name) {
       fs::path p = models / name;

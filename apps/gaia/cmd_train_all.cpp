@@ -3,9 +3,6 @@
 // their evaluations, and optionally the fp16 copies for models/. Each stage is this binary run as a child process
 // with its own progress bar; every stage resumes from its checkpoint and a finished stage is skipped, so an
 // interrupted recipe continues where it stopped.
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdio>
 
@@ -23,29 +20,6 @@ struct Stage {
   std::vector<std::string> args;  // after "gaia"
   fs::path done;                  // the stage is finished when this exists
 };
-
-std::string self_exe() {
-  std::error_code ec;
-  auto p = fs::read_symlink("/proc/self/exe", ec);
-  if (ec) fail("train-all: cannot find the gaia binary to run the stages ({})", ec.message());
-  return p.string();
-}
-
-int run_child(const std::string& exe, const std::vector<std::string>& args) {
-  std::vector<char*> argv{const_cast<char*>(exe.c_str())};
-  for (auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  std::fflush(stdout);
-  const pid_t pid = fork();
-  if (pid < 0) fail("train-all: fork failed");
-  if (pid == 0) {
-    execv(exe.c_str(), argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-}
 
 std::string joined(const std::vector<std::string>& a) {
   std::string s = "gaia";
@@ -147,7 +121,6 @@ void register_train_all(CLI::App& app) {
         stages.push_back({"ship " + to, {"convert", from, "--half", "--out", (fs::path(*ship) / to).string()},
                           fs::path(*ship) / to});
     }
-    const std::string exe = self_exe();
     fs::create_directories(out);
     nlohmann::json log = nlohmann::json::array();
     for (size_t i = 0; i < stages.size(); ++i) {
@@ -160,7 +133,7 @@ void register_train_all(CLI::App& app) {
       }
       std::printf("[%zu/%zu] %s: %s\n", i + 1, stages.size(), s.name.c_str(), line.c_str());
       const auto t0 = std::chrono::steady_clock::now();
-      const int rc = run_child(exe, s.args);
+      const int rc = run_gaia_child(s.args);
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (rc != 0) fail("train-all: stage '{}' failed (exit {}); fix it and run the same command again to resume", s.name, rc);
       if (s.name == "data") write_file_atomic(s.done, "");  // gaia synth has no single final file of its own

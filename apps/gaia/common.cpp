@@ -1,5 +1,10 @@
 #include "common.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+
 #include <regex>
 
 #include <opencv2/core.hpp>
@@ -8,6 +13,25 @@
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::app {
+
+int run_gaia_child(const std::vector<std::string>& args) {
+  std::error_code ec;
+  const std::string exe = fs::read_symlink("/proc/self/exe", ec).string();
+  if (ec) fail("cannot find the gaia binary to run '{}' ({})", args.empty() ? "" : args[0], ec.message());
+  std::vector<char*> argv{const_cast<char*>(exe.c_str())};
+  for (auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  std::fflush(stdout);
+  const pid_t pid = fork();
+  if (pid < 0) fail("fork failed");
+  if (pid == 0) {
+    execv(exe.c_str(), argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
 
 std::string g_command_line = "gaia";
 

@@ -27,6 +27,10 @@ Config resolve_config(const SharedFlags& f);
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
 
+// Runs this gaia binary again as a child process with `args` (after "gaia"), sharing stdout/stderr, and returns
+// its exit status: train-all's stages and demo --from-scratch.
+int run_gaia_child(const std::vector<std::string>& args);
+
 // The exact command line of this run (set by main), recorded in reports so that every figure can be remade.
 extern std::string g_command_line;
 

@@ -140,6 +140,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
 
   // Counterfactual replay of the procedural world under the same commands: ground truth for every rollout.
   std::vector<std::vector<cv::Mat>> truth(static_cast<size_t>(R));
+  Readback truth_read;  // the probe on the ground truth, per rollout
   if (raw) {
     const int stride = int(std::lround(raw->episode(0).meta().fps / (ds.rate_hz() > 0 ? ds.rate_hz() : 6.25)));
     const fs::path cf = out.dir / "counterfactual";
@@ -160,8 +161,8 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       for (int64_t k = 0; k <= F; ++k) truth[size_t(r)].push_back(rep.frame_bgr(k * stride));  // steps P-1 .. P+F-1
     }
     fs::remove_all(cf);  // frames on disk were only a means; the numbers and videos are what stays
-    Readback rt = read_rows(m, truth, 0);
-    j["counterfactual_probe"] = agreement(cmd_speed, cmd_curv, rt, all);  // the probe on ground truth: the ceiling
+    truth_read = read_rows(m, truth, 0);
+    j["counterfactual_probe"] = agreement(cmd_speed, cmd_curv, truth_read, all);  // the probe on ground truth: the ceiling
     double pw = 0, pn = 0;
     std::vector<torch::Tensor> fg, ft, fnull;
     for (int64_t r = 0; r < R; ++r) {
@@ -196,12 +197,8 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       cs += cmd_speed[r] / o.prompts;
       rs += rw.speed[r] / o.prompts;
     }
-    if (raw) {
-      for (int i = 0; i < o.prompts; ++i) {
-        auto one = read_dynamics(m, truth[size_t(i * C + c)]);
-        t += one.select(1, 1).mean().item<double>() / o.prompts;
-      }
-    }
+    if (raw)
+      for (int i = 0; i < o.prompts; ++i) t += truth_read.curvature[size_t(i * C + c)] / o.prompts;
     names.push_back(cmds[size_t(c)].name);
     s_cmd.y.push_back(cmd_curv[size_t(c)] * 1000);
     s_with.y.push_back(a * 1000);

@@ -52,11 +52,10 @@ Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frame
     p.episodes.push_back(e);
     p.starts.push_back(s);
     auto ep = ds.episode(e);
-    for (int64_t k = 0; k < frames; ++k) {
-      for (int64_t j = 0; j < n; ++j) p.tokens[i][k][j] = int64_t(ep->tokens[size_t((s + k) * n + j)]);
-      p.actions[i][k][0] = ds.actions(e)[size_t(2 * (s + k))] / world::kSpeedScale;
-      p.actions[i][k][1] = ds.actions(e)[size_t(2 * (s + k) + 1)] / world::kCurvatureScale;
-    }
+    p.tokens[i].copy_(torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + s * n, {frames, n}, torch::kInt));
+    p.actions[i].copy_(torch::from_blob(const_cast<float*>(ds.actions(e).data()) + 2 * s, {frames, 2}, torch::kFloat));
+    p.actions[i].select(1, 0).div_(world::kSpeedScale);
+    p.actions[i].select(1, 1).div_(world::kCurvatureScale);
   }
   return p;
 }
