@@ -1,13 +1,35 @@
 // train::StepLoop: a resumed run's metrics.jsonl keeps each step once (the steps an interrupted run did past its
 // last checkpoint are trained again and logged again), and a torn last line of a killed run is dropped.
+#include <chrono>
 #include <fstream>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
+#include "gaia/core/progress.h"
 #include "gaia/train/step_loop.h"
 #include "test_util.h"
 
 using namespace gaia;
+
+// A resumed run's progress bar counts its rate from the resume point: 1 step in ~20 ms is ~50 steps/s, not
+// (resume step + 1) / 20 ms, which would promise an ETA a thousand times too short.
+TEST(ProgressBar, ResumedRunRateCountsOnlyNewSteps) {
+  testing::internal::CaptureStderr();
+  {
+    ProgressBar bar(2000, "train", true, 1000);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    bar.update(1001);
+    bar.finish();
+  }
+  const std::string out = testing::internal::GetCapturedStderr();
+  const auto at = out.rfind("% ");
+  ASSERT_NE(at, std::string::npos) << out;
+  const double rate = std::stod(out.substr(at + 2));
+  EXPECT_GT(rate, 0.5) << out;
+  EXPECT_LT(rate, 60.0) << out;  // counting the 1000 earlier steps would give ~50000/s
+  EXPECT_NE(out.find("1001/2000"), std::string::npos) << out;
+}
 
 TEST(StepLoop, ResumeDropsRecordsPastTheCheckpoint) {
   test::TempDir d;

@@ -95,7 +95,7 @@ void register_decoder(CLI::App& app) {
       auto r = decoder::train_decoder(
           c, opt,
           [&](const decoder::DecoderStepLog& l) {
-            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "decoder");
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "decoder", true, l.step);  // a resumed run starts mid-way
             std::string info = fmt::format("loss {:.4f} {:.1f} s/step {}", l.loss, l.seconds, l.task);
             if (l.validation && !l.val.empty())
               info += fmt::format(" | val {:.4f} x0 PSNR {:.1f} dB", l.val.value("loss", 0.0), l.val.value("x0_psnr", 0.0));

@@ -39,7 +39,7 @@ void register_probe(CLI::App& app) {
       auto r = probe::train_probe(
           c, opt,
           [&](int step, int total, double loss, const nlohmann::json&) {
-            if (!bar) bar = std::make_unique<ProgressBar>(total, "probe " + *kind);
+            if (!bar) bar = std::make_unique<ProgressBar>(total, "probe " + *kind, true, step);
             bar->update(step, fmt::format("loss {:.4f}", loss));
           },
           [](const std::string& n) { std::fprintf(stderr, "probe: %s\n", n.c_str()); });

@@ -94,7 +94,7 @@ void register_tokenizer(CLI::App& app) {
       auto r = tokenizer::train_tokenizer(
           c, opt,
           [&](const tokenizer::StepLog& l) {
-            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "tokenizer");
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "tokenizer", true, l.step);  // a resumed run starts mid-way
             std::string info = fmt::format("loss {:.4f} l1 {:.4f}", l.losses.value("loss", 0.0), l.losses.value("l1", 0.0));
             if (l.validation && !l.val.empty())
               info += fmt::format(" | val psnr {:.2f} usage {:.0f}%", l.val.value("psnr", 0.0), 100 * l.val.value("usage", 0.0));

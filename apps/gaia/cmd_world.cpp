@@ -40,7 +40,7 @@ void register_world(CLI::App& app) {
       auto r = world::train_world(
           c, opt,
           [&](const world::WorldStepLog& l) {
-            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "world");
+            if (!bar) bar = std::make_unique<ProgressBar>(l.total, "world", true, l.step);  // a resumed run starts mid-way
             std::string info = fmt::format("loss {:.3f} {:.0f} tok/s", l.loss, l.tokens_per_s);
             if (l.validation && !l.val.empty())
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));

@@ -8,13 +8,14 @@
 
 namespace gaia {
 
-ProgressBar::ProgressBar(int64_t total, std::string label, bool enabled)
-    : total_(total), label_(std::move(label)), enabled_(enabled), tty_(::isatty(STDERR_FILENO) != 0) {
+ProgressBar::ProgressBar(int64_t total, std::string label, bool enabled, int64_t start)
+    : total_(total), start_done_(start), done_(start), label_(std::move(label)), enabled_(enabled),
+      tty_(::isatty(STDERR_FILENO) != 0) {
   start_ = last_draw_ = std::chrono::steady_clock::now();
 }
 
 ProgressBar::~ProgressBar() {
-  if (!finished_ && enabled_ && done_ > 0) finish();
+  if (!finished_ && enabled_ && done_ > start_done_) finish();
 }
 
 std::string ProgressBar::format_duration(double s) {
@@ -55,7 +56,7 @@ void ProgressBar::finish(const std::string& info) {
 void ProgressBar::draw(bool final) {
   double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   double frac = total_ > 0 ? static_cast<double>(done_) / static_cast<double>(total_) : 0.0;
-  double rate = elapsed > 0 ? static_cast<double>(done_) / elapsed : 0.0;
+  double rate = elapsed > 0 ? static_cast<double>(done_ - start_done_) / elapsed : 0.0;
   double eta = rate > 0 ? static_cast<double>(total_ - done_) / rate : -1;
   constexpr int kWidth = 24;
   int filled = static_cast<int>(frac * kWidth);

@@ -9,7 +9,8 @@ namespace gaia {
 
 class ProgressBar {
  public:
-  ProgressBar(int64_t total, std::string label, bool enabled = true);
+  // `start` is where a resumed run picks up: rate and ETA count only the work done since then.
+  ProgressBar(int64_t total, std::string label, bool enabled = true, int64_t start = 0);
   ~ProgressBar();
   void update(int64_t done, const std::string& info = "");  // cheap; redraws at most ~10 times a second
   void finish(const std::string& info = "");
@@ -17,7 +18,7 @@ class ProgressBar {
 
  private:
   void draw(bool final);
-  int64_t total_, done_ = 0;
+  int64_t total_, start_done_, done_;
   std::string label_, info_;
   bool enabled_, tty_, finished_ = false;
   int last_decile_ = -1;
