@@ -62,6 +62,38 @@ static void BM_RolloutCached(benchmark::State& st) {
   for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
   st.counters["frames/s"] = benchmark::Counter(double(F) * st.iterations(), benchmark::Counter::kIsRate);
 }
+// Where one generated token's time goes (a rollout is n = 144 of these per frame): the transformer body over the
+// cached context (half full), the head's logits, and top-k sampling.
+static void BM_TokenParts(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  m->eval();
+  c10::InferenceMode im;
+  const int64_t L = m->layout.length();
+  KVCache cache = m->make_cache(1, L);
+  m->body(torch::randn({1, L / 2, m->d}), &cache);
+  auto tok = torch::zeros({1, 1, 1}, torch::kLong);
+  auto last = torch::randn({1, m->d});
+  SamplingOptions so;
+  so.strategy = Strategy::TopK;
+  so.top_k = c.world.top_k;
+  auto gen = at::detail::createCPUGenerator(0);
+  const int part = int(st.range(0));
+  for (auto _ : st) {
+    if (part == 0) {  // embed + body for one token
+      cache.length = L / 2;
+      benchmark::DoNotOptimize(m->body(m->embed_image(tok, 4, 3).view({1, 1, m->d}), &cache));
+    } else if (part == 1) {
+      benchmark::DoNotOptimize(m->logits(last));
+    } else {
+      benchmark::DoNotOptimize(sample_tokens(m->logits(last), so, gen));
+    }
+  }
+  st.SetLabel(part == 0 ? "embed+body" : part == 1 ? "logits" : "logits+top-k sample");
+}
+BENCHMARK(BM_TokenParts)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
 BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the

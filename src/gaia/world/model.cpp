@@ -126,7 +126,7 @@ KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity) const {
   const int64_t H = cfg.n_heads, hd = d / H;
   auto opts = token_embedding->weight.options().requires_grad(false);
   for (int i = 0; i < cfg.n_layers; ++i) {
-    c.k.push_back(torch::empty({batch, H, capacity, hd}, opts));
+    c.k.push_back(torch::empty({batch, H, hd, capacity}, opts));  // keys transposed (transformer.h)
     c.v.push_back(torch::empty({batch, H, capacity, hd}, opts));
   }
   return c;

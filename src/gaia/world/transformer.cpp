@@ -1,6 +1,11 @@
 #include "gaia/world/transformer.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
+#include <vector>
+
+#include <ATen/Parallel.h>
 
 #include <torch/version.h>
 
@@ -16,15 +21,17 @@ CausalSelfAttentionImpl::CausalSelfAttentionImpl(int64_t d_, int64_t heads_) : h
 
 namespace {
 
-// q [B, H, Lq, hd], k/v [B, H, Lk, hd]; query i sits at key position offset + i and sees keys <= that.
-torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v, int64_t offset) {
-  const int64_t Lq = q.size(2), Lk = k.size(2);
+// q [B, H, Lq, hd], kT [B, H, hd, Lk] (keys transposed), v [B, H, Lk, hd]; query i sits at key position
+// offset + i and sees keys <= that.
+torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torch::Tensor& v, int64_t offset) {
+  const int64_t Lq = q.size(2), Lk = kT.size(3);
 #if TORCH_VERSION_MAJOR >= 2
-  if (offset == 0 && Lq == Lk) return at::scaled_dot_product_attention(q, k, v, {}, 0.0, /*is_causal=*/true);
+  if (offset == 0 && Lq == Lk)
+    return at::scaled_dot_product_attention(q, kT.transpose(2, 3), v, {}, 0.0, /*is_causal=*/true);
 #endif
   const int64_t B = q.size(0), H = q.size(1), hd = q.size(3);
   const double scale = 1.0 / std::sqrt(double(hd));
-  auto q3 = q.reshape({B * H, Lq, hd}), kt = k.reshape({B * H, Lk, hd}).transpose(1, 2);
+  auto q3 = q.reshape({B * H, Lq, hd}), kt = kT.reshape({B * H, hd, Lk});
   torch::Tensor att;  // [B * H, Lq, Lk]
   if (Lq > 1) {
     // Additive causal mask fused into the product (one pass over the L x L scores instead of three).
@@ -38,24 +45,101 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch
   return torch::bmm(torch::softmax(att, -1), v.reshape({B * H, Lk, hd})).view({B, H, Lq, hd});
 }
 
+// The two inner loops of one query's attention, compiled for AVX2 as well as the baseline x86-64 ISA where the
+// compiler supports function multiversioning (picked at load time; the build stays portable).
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
+#define GAIA_SIMD_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define GAIA_SIMD_CLONES
+#endif
+
+// out[j] = scale * q . k_j for j < Lk, keys transposed (KT row e holds component e of every key, row stride `cap`):
+// a broadcast multiply-add per component over contiguous keys, which vectorises without horizontal sums.
+GAIA_SIMD_CLONES void score_keys(const float* q, const float* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
+                                 float* out) {
+  std::fill(out, out + Lk, 0.0f);
+  for (int64_t e = 0; e < hd; ++e) {
+    const float qe = q[e] * scale;
+    const float* row = KT + e * cap;
+    for (int64_t j = 0; j < Lk; ++j) out[j] += qe * row[j];
+  }
+}
+
+// y = sum_j p[j] V[j] over Lk rows of hd floats.
+GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, int64_t hd, float* y) {
+  std::fill(y, y + hd, 0.0f);
+  for (int64_t j = 0; j < Lk; ++j) {
+    const float w = p[j];
+    const float* v = V + j * hd;
+    for (int64_t e = 0; e < hd; ++e) y[e] += w * v[e];
+  }
+}
+
+// Sampling's case: one new token per row appended to a float32 CPU cache. The general path spends ~20 small
+// LibTorch operations per layer on views, cache writes and two batched products of a single query; here the cache
+// write and the scores are one pass over raw memory, then one softmax and one weighted sum (docs/benchmarks.md).
+// qkv [B, 3d] (per row: q | k | v, each H x hd) -> [B, d]; the cache grows by one at `offset`.
+torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
+                                int64_t heads) {
+  const int64_t B = qkv.size(0), d = qkv.size(1) / 3, hd = d / heads, cap = K.size(3), Lk = offset + 1;
+  const float scale = float(1.0 / std::sqrt(double(hd)));
+  auto src = qkv.contiguous();
+  auto out = torch::empty({B, d}, qkv.options());
+  const float* in = src.data_ptr<float>();
+  float *kc = K.data_ptr<float>(), *vc = V.data_ptr<float>(), *y = out.data_ptr<float>();
+  auto scores = torch::empty({B * heads, Lk}, qkv.options());  // [B * H, Lk]
+  float* sc = scores.data_ptr<float>();
+  // Pass 1: append this token's key and value, score the query against every cached key.
+  at::parallel_for(0, B * heads, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t bh = begin; bh < end; ++bh) {
+      const int64_t b = bh / heads, h = bh % heads;
+      const float* q = in + b * 3 * d + h * hd;
+      float* kb = kc + (bh * hd) * cap;  // KT[b, h, 0, 0]
+      for (int64_t e = 0; e < hd; ++e) kb[e * cap + offset] = q[d + e];
+      std::copy(q + 2 * d, q + 2 * d + hd, vc + (bh * cap + offset) * hd);
+      score_keys(q, kb, cap, Lk, hd, scale, sc + bh * Lk);
+    }
+  });
+  const auto probs = scores.softmax(-1);  // one vectorised pass over all rows
+  const float* pr = probs.data_ptr<float>();
+  // Pass 2: y = sum_j p_j v_j, written straight into the head's slice of the output row.
+  at::parallel_for(0, B * heads, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t bh = begin; bh < end; ++bh) {
+      const int64_t b = bh / heads, h = bh % heads;
+      weighted_sum(pr + bh * Lk, vc + (bh * cap) * hd, Lk, hd, y + b * d + h * hd);
+    }
+  });
+  return out;
+}
+
 }  // namespace
 
 torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* cache, int layer) {
   const int64_t B = x.size(0), L = x.size(1), hd = d / heads;
+  if (cache && L == 1 && x.device().is_cpu() && x.scalar_type() == torch::kFloat && !torch::GradMode::is_enabled()) {
+    auto& K = cache->k[static_cast<size_t>(layer)];
+    auto& V = cache->v[static_cast<size_t>(layer)];
+    TORCH_CHECK(cache->length < cache->capacity(), "KV cache overflow: ", cache->length, " + 1 > ", cache->capacity());
+    if (K.is_contiguous() && V.is_contiguous() && K.scalar_type() == torch::kFloat) {
+      auto x2 = x.view({B, d});  // 2-D products: LibTorch's linear pays for folding a 3-D input on every call
+      return proj->forward(attend_one_cached(qkv->forward(x2), K, V, cache->length, heads)).view({B, 1, d});
+    }
+  }
   auto qkv_ = qkv->forward(x).view({B, L, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, B, H, L, hd]
   auto q = qkv_[0], k = qkv_[1], v = qkv_[2];
+  auto kT = k.transpose(2, 3);  // [B, H, hd, L]
   int64_t offset = 0;
   if (cache) {
     offset = cache->length;
     TORCH_CHECK(offset + L <= cache->capacity(), "KV cache overflow: ", offset, " + ", L, " > ", cache->capacity());
     auto& K = cache->k[static_cast<size_t>(layer)];
     auto& V = cache->v[static_cast<size_t>(layer)];
-    K.narrow(2, offset, L).copy_(k);
+    K.narrow(3, offset, L).copy_(k.transpose(2, 3));
     V.narrow(2, offset, L).copy_(v);
-    k = K.narrow(2, 0, offset + L);
+    kT = K.narrow(3, 0, offset + L);
     v = V.narrow(2, 0, offset + L);
   }
-  auto y = attend(q, k, v, offset);  // [B, H, L, hd]
+  auto y = attend(q, kT, v, offset);  // [B, H, L, hd]
   return proj->forward(y.transpose(1, 2).reshape({B, L, d}));
 }
 
@@ -68,6 +152,11 @@ BlockImpl::BlockImpl(int64_t d, int64_t heads) {
 }
 
 torch::Tensor BlockImpl::forward(const torch::Tensor& x, KVCache* cache, int layer) {
+  if (cache && x.size(1) == 1) {  // one token per row (sampling): the MLP on 2-D rows, see attention above
+    const int64_t B = x.size(0), d = x.size(2);
+    auto h = (x + attn->forward(ln1->forward(x), cache, layer)).view({B, d});
+    return (h + fc_proj->forward(F::gelu(fc->forward(ln2->forward(h))))).view({B, 1, d});
+  }
   auto h = x + attn->forward(ln1->forward(x), cache, layer);
   return h + fc_proj->forward(F::gelu(fc->forward(ln2->forward(h))));
 }

@@ -11,9 +11,11 @@ namespace gaia::world {
 // Keys and values of every layer for the tokens seen so far, preallocated to a capacity (the context length), so
 // appending a token writes in place instead of copying the cache.
 struct KVCache {
-  std::vector<torch::Tensor> k, v;  // per layer [B, H, capacity, hd]
+  // Per layer: keys transposed [B, H, hd, capacity], so that one query's scores against every cached key are
+  // contiguous multiply-adds (no horizontal sums); values [B, H, capacity, hd].
+  std::vector<torch::Tensor> k, v;
+  int64_t capacity() const { return k.empty() ? 0 : k[0].size(3); }
   int64_t length = 0;               // tokens cached
-  int64_t capacity() const { return k.empty() ? 0 : k[0].size(2); }
   void reset() { length = 0; }
 };
 
