@@ -137,6 +137,19 @@ TEST(WorldSampling, TopKNeverLeavesTheTopK) {
     }
   }
   EXPECT_EQ(seen.size(), 5u);  // and it does sample, not just take the argmax
+  // Top-k draws follow the renormalised distribution (the sampler draws among the k kept logits only).
+  {
+    auto row = torch::full({1, 100}, -4.0f);
+    for (int64_t j = 0; j < 6; ++j) row[0][10 * j + 3] = 1.0f - 0.5f * float(j);  // six leaders, the 6th cut
+    SamplingOptions hot = o;
+    hot.temperature = 0.7;
+    auto want = sampling_distribution(row, hot)[0];
+    std::vector<int> count(100, 0);
+    const int draws = 6000;
+    for (int r = 0; r < draws; ++r) ++count[size_t(sample_tokens(row, hot, gen)[0].item<int64_t>())];
+    for (int64_t j = 0; j < 100; ++j)
+      EXPECT_NEAR(count[size_t(j)] / double(draws), want[j].item<double>(), 0.025) << "token " << j;
+  }
   // Argmax, top-p and temperature.
   o.strategy = Strategy::Argmax;
   EXPECT_TRUE(torch::equal(sample_tokens(logits, o, gen), logits.argmax(-1)));

@@ -51,6 +51,14 @@ torch::Tensor sampling_distribution(const torch::Tensor& logits_in, const Sampli
 
 torch::Tensor sample_tokens(const torch::Tensor& logits, const SamplingOptions& o, torch::Generator& gen) {
   if (o.strategy == Strategy::Argmax) return logits.argmax(-1);
+  if (o.strategy == Strategy::TopK && o.top_k >= 1 && o.temperature > 0) {
+    // The same distribution as sampling_distribution's, drawn over the k kept logits only: a rollout samples
+    // n tokens per frame, and masking all K codes costs several passes over [B, K] per token.
+    auto top = logits.to(torch::kFloat).topk(std::min<int64_t>(o.top_k, logits.size(-1)), -1);
+    auto p = torch::softmax(std::get<0>(top) / o.temperature, -1).to(torch::kCPU);
+    auto pick = torch::multinomial(p, 1, false, gen).to(logits.device());  // [B, 1] rank among the top k
+    return std::get<1>(top).gather(-1, pick).squeeze(-1);
+  }
   auto p = sampling_distribution(logits, o);
   return torch::multinomial(p.to(torch::kCPU), 1, false, gen).squeeze(-1).to(logits.device());
 }
