@@ -81,7 +81,8 @@ static void BM_TokenParts(benchmark::State& st) {
   auto gen = at::detail::createCPUGenerator(0);
   const int part = int(st.range(0));
   for (auto _ : st) {
-    if (part == 0) {  // embed + body for one token
+    if (part == 0 || part == 3) {  // embed + body for one token (3: the general, unfused attention)
+      cache.fused_single_token = part == 0;
       cache.length = L / 2;
       benchmark::DoNotOptimize(m->body(m->embed_image(tok, 4, 3).view({1, 1, m->d}), &cache));
     } else if (part == 1) {
@@ -90,9 +91,10 @@ static void BM_TokenParts(benchmark::State& st) {
       benchmark::DoNotOptimize(sample_tokens(m->logits(last), so, gen));
     }
   }
-  st.SetLabel(part == 0 ? "embed+body" : part == 1 ? "logits" : "logits+top-k sample");
+  st.SetLabel(part == 0 ? "embed+body" : part == 3 ? "embed+body, unfused attention (baseline)"
+                                       : part == 1 ? "logits" : "logits+top-k sample");
 }
-BENCHMARK(BM_TokenParts)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 

@@ -109,6 +109,16 @@ TEST(WorldModel, KvCacheMatchesFullForward) {
   auto inc = torch::cat(parts, 1);
   EXPECT_EQ(cache.length, x.size(1));
   EXPECT_LT((inc - full).abs().max().item<double>(), 1e-4);
+  // The fused one-token attention against the general path, token by token on the same cache contents.
+  auto general = m->make_cache(2, m->layout.length());
+  general.fused_single_token = false;
+  cache.reset();
+  std::vector<torch::Tensor> a, g;
+  for (p = 0; p < x.size(1); ++p) {
+    a.push_back(m->logits(m->body(x.narrow(1, p, 1), &cache)));
+    g.push_back(m->logits(m->body(x.narrow(1, p, 1), &general)));
+  }
+  EXPECT_LT((torch::cat(a, 1) - torch::cat(g, 1)).abs().max().item<double>(), 1e-5);
 }
 
 TEST(WorldModel, ParameterCountEqualsThePlan) {

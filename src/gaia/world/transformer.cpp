@@ -116,7 +116,7 @@ torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torc
 
 torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* cache, int layer) {
   const int64_t B = x.size(0), L = x.size(1), hd = d / heads;
-  if (cache && L == 1 && x.device().is_cpu() && x.scalar_type() == torch::kFloat && !torch::GradMode::is_enabled()) {
+  if (cache && cache->fused_single_token && L == 1 && x.device().is_cpu() && x.scalar_type() == torch::kFloat && !torch::GradMode::is_enabled()) {
     auto& K = cache->k[static_cast<size_t>(layer)];
     auto& V = cache->v[static_cast<size_t>(layer)];
     TORCH_CHECK(cache->length < cache->capacity(), "KV cache overflow: ", cache->length, " + 1 > ", cache->capacity());

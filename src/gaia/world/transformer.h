@@ -16,6 +16,9 @@ struct KVCache {
   std::vector<torch::Tensor> k, v;
   int64_t capacity() const { return k.empty() ? 0 : k[0].size(3); }
   int64_t length = 0;               // tokens cached
+  // One token per row on a float32 CPU cache takes the fused path (attention on raw memory); false forces the
+  // general LibTorch path, which tests and benchmarks use as the reference.
+  bool fused_single_token = true;
   void reset() { length = 0; }
 };
 
