@@ -96,6 +96,23 @@ static void BM_TokenParts(benchmark::State& st) {
 }
 BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
+// Steady state beyond the context: 16 frames after a 7-frame prompt, the window dropping `stride` steps when full
+// (1 = the paper: the 7-step history is re-encoded after every frame).
+static void BM_RolloutSliding(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  RolloutPrompt p;
+  const int64_t P = c.world.context_steps - 1, F = 16;
+  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.window_stride = int(st.range(0));
+  for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
+  st.counters["frames/s"] = benchmark::Counter(double(F) * st.iterations(), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_RolloutSliding)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the

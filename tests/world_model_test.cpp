@@ -213,22 +213,30 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
   p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+  for (int stride : {1, 2, int(T) - 1}) {
   RolloutOptions o;
   o.frames = int(F);
   o.sampling.strategy = Strategy::Argmax;
+  o.window_stride = stride;
   auto r = rollout(m, p, o);
   ASSERT_EQ(r.tokens.sizes(), (std::vector<int64_t>{1, P + F, kN}));
   EXPECT_TRUE(torch::equal(r.tokens[0].narrow(0, 0, P), p.tokens));
   torch::NoGradGuard ng;
-  for (int64_t k = P; k < P + F; ++k) {
-    const int64_t k0 = std::max<int64_t>(0, k - T + 1);
+  int64_t k0 = 0;  // first step of the window frame k sees: it drops `stride` steps when T are in it
+  for (int64_t k = 0; k < P + F; ++k) {
+    if (k - k0 == T) k0 = k - (T - stride);
+    if (k < P) continue;
     WorldBatch b;
     b.tokens = r.tokens.narrow(1, k0, k - k0 + 1);
     b.actions = p.actions.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     b.text_ids = p.text_ids.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     auto want = m->forward(b).select(1, k - k0).argmax(-1);  // [1, n]
-    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k;
+    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k << ", stride " << stride;
   }
+  }
+  RolloutOptions bad;
+  bad.window_stride = int(T);
+  EXPECT_NE(test::error_of([&] { rollout(m, p, bad); }).find("window stride"), std::string::npos);
 }
 
 TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {

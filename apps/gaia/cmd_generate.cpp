@@ -23,7 +23,7 @@ namespace {
 struct GenerateFlags {
   std::string world, tokenizer, tokens, episode, video, actions_csv, steer = "none", text, negative;
   std::string sampling, token_schedule = "constant", frame_schedule = "constant";
-  int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0;
+  int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0, window_stride = 1;
   double speed = -1, top_p = 0.9, temperature = 1.0, guidance = 0;
 };
 
@@ -51,6 +51,8 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)");
   cmd->add_option("--prompt-frames", g->prompt_frames, "prompt frames (default: context - 1, at most 4)");
   cmd->add_option("--frames", g->frames, "frames to generate (sliding window beyond the context)");
+  cmd->add_option("--window-stride", g->window_stride,
+                  "steps the window drops when full (1 = the paper; S re-encodes the history every S frames, faster)");
   cmd->add_option("--futures", g->futures, "futures sampled in one batch");
   cmd->add_option("--actions", g->actions_csv, "CSV with speed,curvature columns, one row per generated frame");
   cmd->add_option("--steer", g->steer, "steering preset: left, right, strong-left, strong-right, straight");
@@ -150,6 +152,7 @@ void register_generate(CLI::App& app) {
     world::RolloutOptions o;
     o.frames = int(F);
     o.futures = g->futures;
+    o.window_stride = g->window_stride;
     o.seed = uint64_t(run.run.seed);
     o.sampling.strategy = world::parse_strategy(g->sampling.empty() ? "top-k" : g->sampling);
     o.sampling.top_k = g->top_k > 0 ? g->top_k : info.config.world.top_k;
@@ -168,7 +171,7 @@ void register_generate(CLI::App& app) {
     bar.finish();
     fs::create_directories(flags->out);
     auto grid = r.tokens.view({g->futures, steps, info.grid_h, info.grid_w}).to(torch::kInt);
-    nlohmann::json meta = {{"prompt_frames", P}, {"frames", F}, {"futures", g->futures},
+    nlohmann::json meta = {{"prompt_frames", P}, {"frames", F}, {"futures", g->futures}, {"window_stride", g->window_stride},
                            {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", g->guidance},
                            {"text", g->text}, {"negative", g->negative}, {"steer", g->steer},
                            {"seconds", r.seconds}, {"frames_per_second", double(F * g->futures) / r.seconds}};

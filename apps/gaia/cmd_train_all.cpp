@@ -36,10 +36,10 @@ void register_train_all(CLI::App& app) {
   auto seconds = std::make_shared<double>(30);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
-  // Steps of each stage: the recipe that made the shipped models (MODEL_CARD.md). The world model and the decoder
-  // ran 3/4 of their config's steps (2400 and 600) to fit a working session on 2 cores.
+  // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
+  // two resumed phases, which one run of each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 1000, world = 1800, decoder = 450, probe_scene = 1500, probe_dynamics = 2000;
+    int tokenizer = 0, finetune = 1000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");

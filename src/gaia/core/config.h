@@ -47,7 +47,7 @@ struct TokenizerConfig {
 };
 
 struct WorldConfig {
-  // CPU-sized: ~2.2M parameters, ~2400 tokens/s on one core, the default recipe trains in ~1.5 h (MODEL_CARD.md).
+  // CPU-sized: ~2.5M parameters, ~2400 tokens/s on one core, the default recipe trains in ~2 h (MODEL_CARD.md).
   int d_model = 192;             // d; paper §2.1: d = 4096
   int n_layers = 4;              // paper-scale 6.5B implies 32 layers at d = 4096 (12 d^2 per layer)
   int n_heads = 6;
@@ -60,10 +60,10 @@ struct WorldConfig {
   // paper §4.2 conditioning mix: unconditional / action / text = 20% / 40% / 40%
   double p_uncond = 0.2, p_action = 0.4, p_text = 0.4;
   // paper §4.2 optimiser: AdamW lr 1e-4, wd 0.1, betas (0.9, 0.95), clip 1.0; 2.5k warm-up, cosine to lr/10
-  // (batch 512 x 15860 tokens, 100k steps). The CPU recipe trains 2.4k steps of 4 x 1296 tokens, so, as for small
-  // GPTs, a higher rate with the same shape.
+  // (batch 512 x 15860 tokens, 100k steps). The CPU recipe trains 3k steps of 4 x 1296 tokens, so, as for small
+  // GPTs, a higher rate with the same shape (the shipped model: models/MODEL_CARD.md).
   double lr = 6e-4, weight_decay = 0.1, beta1 = 0.9, beta2 = 0.95, grad_clip = 1.0, final_lr_ratio = 0.1;
-  int warmup_steps = 100, steps = 2400, batch_size = 4;
+  int warmup_steps = 100, steps = 3000, batch_size = 4;
   bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
   int top_k = 50;                // paper §5.1 Fig. 5: top-k = 50
   double temperature = 1.0;
@@ -93,11 +93,14 @@ struct DecoderConfig {
   double w_l1 = 0.1, w_l2 = 1.0;  // paper §4.3
   double ema_decay = 0.999;      // paper §4.3
   // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6 (batch 64, 300k
-  // steps). The CPU recipe trains 600 steps at batch 2 (~1.5 h on one core), so it uses a 4x higher rate with the
-  // same shape; the residual over the coarse frame (cond_image) is what makes so few steps enough.
+  // steps). The CPU recipe trains 1300 steps at batch 2 (~2.5 h on one core), so it uses a 4x higher rate with
+  // the same shape; the residual over the coarse frame (cond_image) is what makes so few steps enough.
   double lr = 2e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.99, grad_clip = 1.0, final_lr = 1e-5;
-  int warmup_steps = 50, steps = 600, batch_size = 2;
-  double schedule_shift = 1.0;   // cosine log-SNR shift (Hoogeboom et al. 2023); < 1 = noisier, for large frames
+  int warmup_steps = 50, steps = 1300, batch_size = 2;
+  // Cosine log-SNR shift (Hoogeboom et al. 2023): log-SNR + 2 log(shift); < 1 = noisier, for large frames (the
+  // paper: 1). The CPU default diffuses the residual over the coarse frame, whose spread is ~1/5 of a frame's, so
+  // at shift 1 most noise levels bury it; 4 moves them back to where the residual is visible (+2.8 in log-SNR).
+  double schedule_shift = 4.0;
 };
 
 struct RunConfig {

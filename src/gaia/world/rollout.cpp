@@ -99,6 +99,8 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
   const bool has_prompt = prompt.tokens.defined() && prompt.tokens.numel() > 0;
   const int64_t P = has_prompt ? prompt.tokens.size(-2) : 0, F = o.frames, steps = P + F;
   if (F < 0 || o.futures < 1) fail("rollout needs frames >= 0 and futures >= 1 (got {} and {})", F, o.futures);
+  if (o.window_stride < 1 || o.window_stride >= L.T)
+    fail("window stride must be in [1, T - 1 = {}] (got {})", L.T - 1, o.window_stride);
   check_prompt(*model, prompt, o.futures, P, steps);
   const torch::Device dev = model->token_embedding->weight.device();
   const int64_t N = o.futures;
@@ -118,12 +120,12 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
   int64_t first = 0;    // global index of the cache's first step
   for (int64_t k = 0; k < steps; ++k) {
     if (win == L.T) {
-      // Sliding window: keep the last T - 1 steps, re-embedded at temporal positions 0..T-2.
-      first = k - (L.T - 1);
+      // Sliding window: keep the last T - stride steps, re-embedded at temporal positions 0..T-stride-1.
+      first = k - (L.T - o.window_stride);
       cache.reset();
       auto hist = cond.at(first, k, all.narrow(1, first, k - first));
       model->body(model->embed(hist, 0), &cache);
-      win = L.T - 1;
+      win = L.T - o.window_stride;
     }
     if (k < P) {  // a prompt frame: the whole step at once
       model->body(model->embed(cond.at(k, k + 1, all.narrow(1, k, 1)), win), &cache);

@@ -31,6 +31,10 @@ struct RolloutOptions {
   SamplingOptions sampling;
   GuidanceSchedule guidance;        // scale 0: no guidance, a single conditional pass
   uint64_t seed = 0;
+  // Steps dropped when the window is full. §2.3 slides by one (every frame sees T - 1 steps of history), which
+  // re-encodes the whole kept history after every frame, because every kept step's temporal position changes;
+  // stride S re-encodes once every S frames, and frames see T - S to T - 1 steps of history.
+  int window_stride = 1;
 };
 
 struct RolloutResult {
