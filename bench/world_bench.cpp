@@ -49,19 +49,6 @@ static void BM_WorldTrainStep(benchmark::State& st) {
 }
 BENCHMARK(BM_WorldTrainStep)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// Frames generated per second after a prompt of T - 1 frames (the context is full for the generated frame).
-static void BM_RolloutCached(benchmark::State& st) {
-  Config c = bench_config();
-  torch::manual_seed(0);
-  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
-  RolloutPrompt p;
-  const int64_t P = c.world.context_steps - 1, F = st.range(0);
-  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
-  RolloutOptions o;
-  o.frames = int(F);
-  for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
-  st.counters["frames/s"] = benchmark::Counter(double(F) * st.iterations(), benchmark::Counter::kIsRate);
-}
 // Where one generated token's time goes (a rollout is n = 144 of these per frame): the transformer body over the
 // cached context (half full), the head's logits, and top-k sampling.
 static void BM_TokenParts(benchmark::State& st) {
@@ -96,40 +83,34 @@ static void BM_TokenParts(benchmark::State& st) {
 }
 BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
-// Steady state beyond the context: 16 frames after a 7-frame prompt, the window dropping `stride` steps when full
-// (1 = the paper: the 7-step history is re-encoded after every frame).
-static void BM_RolloutSliding(benchmark::State& st) {
+// `futures` x `frames` generated after a random prompt of T - 1 frames (the context is full for the first generated
+// frame), the window dropping `stride` steps when full. Counter: generated frames per second over all futures.
+static void run_rollouts(benchmark::State& st, int64_t frames, int64_t futures, int stride) {
   Config c = bench_config();
   torch::manual_seed(0);
   WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
   RolloutPrompt p;
-  const int64_t P = c.world.context_steps - 1, F = 16;
+  const int64_t P = c.world.context_steps - 1;
   p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
   RolloutOptions o;
-  o.frames = int(F);
-  o.window_stride = int(st.range(0));
+  o.frames = int(frames);
+  o.futures = int(futures);
+  o.window_stride = stride;
   for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
-  st.counters["frames/s"] = benchmark::Counter(double(F) * st.iterations(), benchmark::Counter::kIsRate);
+  st.counters["frames/s"] = benchmark::Counter(double(frames * futures) * st.iterations(), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_RolloutSliding)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+static void BM_RolloutCached(benchmark::State& st) { run_rollouts(st, st.range(0), 1, 1); }
 BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Steady state beyond the context: 16 frames, the window dropping `stride` steps when full (1 = the paper: the
+// 7-step history is re-encoded after every frame).
+static void BM_RolloutSliding(benchmark::State& st) { run_rollouts(st, 16, 1, int(st.range(0))); }
+BENCHMARK(BM_RolloutSliding)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the
-// per-token dispatch cost is shared. Counter: generated frames per second summed over the futures.
-static void BM_RolloutBatched(benchmark::State& st) {
-  Config c = bench_config();
-  torch::manual_seed(0);
-  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
-  RolloutPrompt p;
-  const int64_t P = c.world.context_steps - 1, F = 1, N = st.range(0);
-  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
-  RolloutOptions o;
-  o.frames = int(F);
-  o.futures = int(N);
-  for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
-  st.counters["frames/s"] = benchmark::Counter(double(F * N) * st.iterations(), benchmark::Counter::kIsRate);
-}
+// per-token dispatch cost is shared.
+static void BM_RolloutBatched(benchmark::State& st) { run_rollouts(st, 1, st.range(0), 1); }
 BENCHMARK(BM_RolloutBatched)->Arg(4)->Arg(16)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The naive baseline: every new token runs the whole sequence so far through the transformer again.
