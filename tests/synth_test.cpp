@@ -211,6 +211,53 @@ TEST(Synth, EgoStopsAtRedLight) {
   }
 }
 
+// A wandering driver (WorldSpec::wander) steers away from the road's own curvature at random moments, so the
+// recorded steering carries information the road does not; it still stays near its lane.
+TEST(Synth, WanderMakesSteeringDepartFromTheRoad) {
+  auto departure = [](double wander, double* max_offset) {
+    double sq = 0;
+    int n = 0;
+    *max_offset = 0;
+    for (int idx = 0; idx < 3; ++idx) {
+      auto o = small(61, 20.0);
+      o.wander = wander;
+      gs::Simulator sim(o, idx);
+      for (int i = 0; i < 500; ++i) {
+        const gs::ActionStep a = sim.policy();
+        const gs::Ego& e = sim.world().ego();
+        const double dk = a.curvature - sim.world().road().at(e.s).k;
+        sq += dk * dk;
+        ++n;
+        *max_offset = std::max(*max_offset, std::abs(e.d - e.d_ref));
+        EXPECT_LE(std::abs(a.curvature), 0.2);
+        sim.step(a);
+      }
+    }
+    return std::sqrt(sq / n);
+  };
+  double off0 = 0, off1 = 0;
+  const double keep = departure(0, &off0), wander = departure(1.2, &off1);
+  std::cout << "rms(curvature - road curvature): lane keeper " << keep << ", wander 1.2 m " << wander
+            << " 1/m; max |d - d_ref| " << off0 << " / " << off1 << " m\n";
+  EXPECT_GT(wander, 2.5 * keep);
+  // The lane keeper itself strays from its reference in tight bends (pure pursuit cuts corners); the wanderer
+  // strays further, but by no more than its amplitude on top of that.
+  EXPECT_GT(off1, off0 + 0.5);
+  EXPECT_LT(off1, off0 + 1.2 + 0.3);
+
+  TempDir tmp;
+  auto o = small(61, 0.4);
+  o.wander = 1.2;
+  EXPECT_EQ(gs::write_episode(tmp.path, o, 0).extra.at("synth_wander"), "1.2");
+  o.wander = -1;
+  try {
+    gs::Simulator bad(o, 0);
+    ADD_FAILURE() << "negative wander accepted";
+  } catch (const gaia::Error& err) {
+    EXPECT_NE(std::string(err.what()).find("wander"), std::string::npos) << err.what();
+  }
+}
+
 TEST(Synth, CaptionsAgreeWithLabels) {
   const char* weathers[] = {"clear", "overcast", "rain", "fog", "snow"};
   const char* tods[] = {"day", "dusk", "night"};

@@ -36,6 +36,9 @@ void register_synth(CLI::App& app) {
   cmd->add_option("--time", o->time_of_day, "day | dusk | night (default: random)");
   cmd->add_option("--scene", o->scene, "random | bend | red_light | lead_vehicle | straight");
   cmd->add_option("--district", o->district, "virtual district (default: random)");
+  cmd->add_option("--wander", o->wander,
+                  "the driver's lateral wander in its lane, m (0 = lane keeping; steering then carries information "
+                  "the road does not, see docs/synth.md)");
   cmd->add_option("--codec", o->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
   cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
   add_shared_flags(cmd, flags.get(), "dataset directory");

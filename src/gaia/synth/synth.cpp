@@ -28,6 +28,7 @@ WorldSpec spec_from(const SynthOptions& o, int index) {
   s.scene = o.scene;
   s.fps = o.fps;
   s.seconds = o.seconds;
+  s.wander = o.wander;
   return resolve_spec(s);
 }
 
@@ -75,6 +76,7 @@ data::EpisodeMeta Simulator::meta() const {
   m.extra["synth_index"] = std::to_string(s.index);
   m.extra["synth_seconds"] = fmt::format("{}", s.seconds);
   m.extra["synth_scene"] = s.scene;
+  if (s.wander > 0) m.extra["synth_wander"] = fmt::format("{}", s.wander);
   m.extra["synth_district"] = s.district;
   m.extra["district"] = s.district;
   m.extra["lanes"] = std::to_string(world_->layout().lanes_fwd);
@@ -133,6 +135,8 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
   o.seconds = parse_double(need(m, "synth_seconds", where), where.string() + ": synth_seconds");
   o.scene = need(m, "synth_scene", where);
   o.district = need(m, "synth_district", where);
+  if (auto w = m.extra.find("synth_wander"); w != m.extra.end())
+    o.wander = parse_double(w->second, where.string() + ": synth_wander");
   o.overwrite = overwrite;
   if (from < 0 || from > original.size())
     fail("{}: replay start frame {} is outside [0, {}]", where.string(), from, original.size());

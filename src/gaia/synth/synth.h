@@ -26,6 +26,7 @@ struct SynthOptions {
   std::string scene;                 // "" = random mix; random, bend, red_light, lead_vehicle, straight
   std::string district;              // "" = random; see district.h
   std::string frame_codec = "raw";
+  double wander = 0;                 // the driver's lateral wander in its lane, m (WorldSpec::wander)
   bool overwrite = false;            // replace an existing episode with the same id
 };
 

@@ -51,6 +51,7 @@ WorldSpec resolve_spec(WorldSpec spec) {
   if (!(spec.fps > 0 && spec.fps <= 1000)) fail("synth: fps must be in (0, 1000], got {}", spec.fps);
   if (!(spec.seconds > 0 && spec.seconds <= 3600)) fail("synth: seconds must be in (0, 3600], got {}", spec.seconds);
   if (spec.index < 0) fail("synth: episode index must be >= 0, got {}", spec.index);
+  if (!(spec.wander >= 0 && spec.wander <= 3)) fail("synth: wander must be in [0, 3] m, got {}", spec.wander);
   Rng r(stream_key(spec.seed, static_cast<uint64_t>(spec.index), "spec"));
   const double u_district = r.uniform(), u_scene = r.uniform(), u_w = r.uniform(), u_t = r.uniform();
   if (spec.district.empty()) {
@@ -431,11 +432,21 @@ ActionStep World::policy() {
   }
   const double d_goal = layout_.lane_centre(ego_.target_lane);
   ego_.d_ref += std::clamp(d_goal - ego_.d_ref, -1.1 * dt, 1.1 * dt);
+  if (spec_.wander > 0) {
+    // Every 1-4 s a new goal offset in [-wander, wander]; drift there at up to 0.8 m/s. The moments and goals
+    // are random, so the steering they cause cannot be predicted from the road ahead.
+    while (t >= ego_.next_wander_t) {
+      Rng r(stream_key(seed, idx, "wander", ego_.wander_counter++));
+      ego_.wander_goal = r.uniform(-spec_.wander, spec_.wander);
+      ego_.next_wander_t += r.uniform(1, 4);
+    }
+    ego_.wander += std::clamp(ego_.wander_goal - ego_.wander, -0.8 * dt, 0.8 * dt);
+  }
   // Lateral: pure pursuit towards a point on the reference offset ahead.
   const double v = ego_.v;
   const double look = std::clamp(5 + 0.8 * v, 7.0, 25.0);
   double tx, ty;
-  road_.point(ego_.s + look, ego_.d_ref, tx, ty);
+  road_.point(ego_.s + look, ego_.d_ref + ego_.wander, tx, ty);
   const double dx = tx - ego_.x, dy = ty - ego_.y;
   const double fwd = dx * std::cos(ego_.h) + dy * std::sin(ego_.h);
   const double lat = -dx * std::sin(ego_.h) + dy * std::cos(ego_.h);

@@ -31,6 +31,11 @@ struct WorldSpec {
   int index = 0;
   std::string district, weather, time_of_day, scene;  // scene: random, bend, red_light, lead_vehicle, straight
   double fps = 25, seconds = 10;
+  // Lateral wander of the ego's driver within its lane, in metres (0 = a lane-keeping driver). With a lane
+  // keeper the recorded curvature is the road's, which a world model can read off the video, so it learns to
+  // ignore its action inputs; a driver that drifts to a new offset at random moments makes steering carry
+  // information the frames do not (docs/synth.md, "Wander").
+  double wander = 0;
 };
 
 // Fills empty district / weather / time_of_day / scene deterministically from (seed, index) and checks the
@@ -90,6 +95,8 @@ struct Ego {
   double d_ref = 0;
   double v_des = 10, next_vdes_t = 0, next_lc_t = 0;
   uint64_t vdes_counter = 0, lc_counter = 0;
+  double wander = 0, wander_goal = 0, next_wander_t = 0;  // current / goal offset from d_ref (m), next decision
+  uint64_t wander_counter = 0;
 };
 
 class World {
