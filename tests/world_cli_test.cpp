@@ -8,6 +8,7 @@
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/torch/tensor_io.h"
+#include "gaia/world/io.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -116,6 +117,55 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   r = test::run_gaia("generate" + w + " --steer sideways --out " + q(p.dir / "x"));
   EXPECT_NE(r.output.find("sideways"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
+}
+
+// Fine-tuning (--init): the run starts from the given weights and keeps their text vocabulary, even on data whose
+// captions would give another one (here a bare token file without captions); an architecture mismatch is an error.
+TEST(WorldCli, FineTuneStartsFromInitWeightsAndKeepsTheirVocabulary) {
+  auto& p = Pipeline::get();
+  if (!fs::exists(p.run / "world.safetensors")) {
+    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  fs::path first;
+  for (auto& e : fs::directory_iterator(p.tokens / "episodes")) first = std::max(first, e.path());
+  fs::copy_file(first / "tokens.npy", p.dir / "bare.npy", fs::copy_options::overwrite_existing);
+  const fs::path init = p.run / "world.safetensors", ft = p.dir / "finetune";
+  // lr 0: AdamW leaves every weight exactly where --init put it.
+  auto r = test::run_gaia("world train " + q(p.dir / "bare.npy") + p.tiny() + " --init " + q(init) +
+                          " --set world.lr=0 --steps 2 --val-every 100 --out " + q(ft));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("initialised from"), std::string::npos) << r.output;
+  world::WorldInfo a, b;
+  auto m0 = world::load_world(init, torch::kCPU, &a);
+  auto m1 = world::load_world(ft / "world.safetensors", torch::kCPU, &b);
+  EXPECT_GT(a.vocab.size(), 4);
+  EXPECT_TRUE(a.vocab == b.vocab);
+  auto p1 = m1->named_parameters();
+  size_t n = 0;
+  for (auto& kv : m0->named_parameters()) {
+    ASSERT_NE(p1.find(kv.key()), nullptr) << kv.key();
+    EXPECT_TRUE(torch::equal(kv.value(), p1[kv.key()])) << kv.key();
+    ++n;
+  }
+  EXPECT_GT(n, 10u);
+  // Without --init the same data gives no vocabulary at all: the test above is not vacuous.
+  r = test::run_gaia("world train " + q(p.dir / "bare.npy") + p.tiny() + " --steps 1 --val-every 100 --out " +
+                     q(p.dir / "scratch"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  world::WorldInfo c;
+  world::load_world(p.dir / "scratch" / "world.safetensors", torch::kCPU, &c);
+  EXPECT_FALSE(c.vocab == a.vocab);
+
+  r = test::run_gaia("world train " + q(p.dir / "bare.npy") + p.tiny() + " --init " + q(init) +
+                     " --set world.d_model=32 --steps 2 --out " + q(p.dir / "mismatch"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("world.safetensors: '"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("has shape"), std::string::npos) << r.output;
+  r = test::run_gaia("world train " + q(p.dir / "bare.npy") + p.tiny() + " --init " + q(p.dir / "missing.safetensors") +
+                     " --steps 2 --out " + q(p.dir / "missing"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("missing.safetensors"), std::string::npos) << r.output;
 }
 
 // gaia eval end to end on the tiny pipeline (shipped probes: they are fully convolutional, any frame size works):

@@ -98,19 +98,8 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     // Fine-tuning: weights from an earlier run, fresh optimiser and schedule. The architecture must match.
     Config init_cfg;
     auto init = load_tokenizer(opt.init, dev, &init_cfg, &cfg);
-    auto src = init->named_parameters();
-    torch::NoGradGuard ng;
-    for (auto& p : model->named_parameters()) {
-      auto* q = src.find(p.key());
-      if (!q) {
-        if (p.key().rfind("dino_head.", 0) == 0) continue;  // the DINO head is trained from scratch
-        fail("{}: no tensor '{}' (the --init tokenizer has a different architecture)", opt.init.string(), p.key());
-      }
-      if (!q->sizes().equals(p.value().sizes()))
-        fail("{}: '{}' has shape {} but the config needs {}", opt.init.string(), p.key(), shape_str(q->sizes().vec()),
-             shape_str(p.value().sizes().vec()));
-      p.value().copy_(*q);
-    }
+    // the DINO head is trained from scratch
+    train::init_from(*model, *init, opt.init, [](const std::string& k) { return k.rfind("dino_head.", 0) == 0; });
     note("initialised from " + opt.init.string());
   }
   fs::create_directories(opt.out);

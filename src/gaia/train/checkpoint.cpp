@@ -1,5 +1,6 @@
 #include "gaia/train/checkpoint.h"
 
+#include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/torch/tensor_io.h"
 
@@ -55,6 +56,23 @@ uint64_t step_seed(uint64_t seed, int step, uint64_t stream) {
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
   return z ^ (z >> 31);
+}
+
+void init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::path& from,
+               const std::function<bool(const std::string&)>& fresh) {
+  const auto have = src.named_parameters();
+  torch::NoGradGuard ng;
+  for (auto& p : dst.named_parameters()) {
+    const auto* q = have.find(p.key());
+    if (!q) {
+      if (fresh && fresh(p.key())) continue;
+      fail("{}: no tensor '{}' (the --init weights have a different architecture)", from.string(), p.key());
+    }
+    if (!q->sizes().equals(p.value().sizes()))
+      fail("{}: '{}' has shape {} but the config needs {}", from.string(), p.key(), shape_str(q->sizes().vec()),
+           shape_str(p.value().sizes().vec()));
+    p.value().copy_(q->to(p.value().device(), p.value().scalar_type()));
+  }
 }
 
 }  // namespace gaia::train

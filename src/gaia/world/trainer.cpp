@@ -38,9 +38,20 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     fail("{}: no training window of {} steps (world.context_steps); episodes are too short", opt.tokens.string(), T);
   WindowSampler sampler(ds, train_windows, ds.bare() ? std::vector<std::string>{} : cfg.data.balance_world,
                         cfg.data.balance_exponent, cfg.data.balance_bins);
+  // Fine-tuning keeps the --init model's vocabulary (on other data, word counts would renumber the words its
+  // text embeddings were trained on), also when a fine-tuning run resumes.
+  WorldModel init{nullptr};
+  WorldInfo init_info;
+  if (!opt.init.empty()) {
+    init = load_world(opt.init, dev, &init_info);
+    if (init_info.grid_h != ds.grid_h() || init_info.grid_w != ds.grid_w() || init_info.K != ds.codebook_size())
+      fail("{}: a {}x{} token grid with K = {}, but {} has {}x{} with K = {}", opt.init.string(), init_info.grid_h,
+           init_info.grid_w, init_info.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
+  }
   text::Vocab vocab;
-  if (ds.has_captions()) vocab = build_vocab(ds, train_eps, wc.text_vocab);
-  else note("no captions in the token dataset: text conditioning uses the null text only");
+  if (init) vocab = init_info.vocab;
+  else if (ds.has_captions()) vocab = build_vocab(ds, train_eps, wc.text_vocab);
+  if (!ds.has_captions()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
 
@@ -59,7 +70,11 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     step = st.step;
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+  } else if (init) {
+    train::init_from(*model, *init, opt.init);  // fresh optimiser and schedule
+    note("initialised from " + opt.init.string());
   }
+  init = nullptr;
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {

@@ -15,6 +15,7 @@ namespace gaia::world {
 
 struct WorldTrainOptions {
   fs::path tokens, out;       // OUT/checkpoint/ (resumable), OUT/world.safetensors, OUT/metrics.jsonl
+  fs::path init;              // fine-tuning: start from these weights (and keep their text vocabulary)
   int steps = -1;             // -1: config world.steps
   int val_every = 250;
   size_t val_windows = 64;    // held-out windows scored at each validation
