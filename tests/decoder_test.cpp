@@ -339,6 +339,35 @@ TEST(DecoderVideo, ForwardAndWindowAreRepeatable) {
   EXPECT_TRUE(torch::equal(a, b)) << (a - b).abs().max().item<float>();
 }
 
+// §5.2 mixing: with probability 1 every step averages in the image (temporal-off) prediction, but only on frames
+// with tokens. With one DDIM step the output is a function of that one v, so frames without tokens (interpolation)
+// must come out exactly as without mixing, and frames with tokens must not.
+TEST(DecoderVideo, ImageVideoMixingOnlyTouchesFramesWithTokens) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  randomize(*m, 9);
+  m->eval();
+  auto in = random_input(m, 1, 5, 32, 64, 6);
+  WindowInput w;
+  w.frames = in.x.clamp(-1, 1);
+  w.context = torch::tensor({1.f, 0.f, 0.f, 0.f, 1.f}).unsqueeze(0);
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  w.tokens.select(1, 0).fill_(m->K);  // context frames carry no tokens
+  w.tokens.select(1, 4).fill_(m->K);
+  w.tokens.select(1, 2).fill_(m->K);  // frame 2: interpolated (no tokens)
+  w.cond_image = in.cond_image.clamp(-1, 1) * 0.1;
+  w.cond_image.select(1, 2).zero_();
+  SampleOptions mixed, plain;
+  mixed.steps = plain.steps = 1;
+  mixed.mix_probability = 1.0;
+  plain.mix_probability = 0.0;
+  NoiseSchedule sch;
+  auto a = sample_window(m, sch, w, mixed), b = sample_window(m, sch, w, plain);
+  EXPECT_TRUE(torch::equal(a.select(1, 2), b.select(1, 2))) << "interpolated frame changed by mixing";
+  EXPECT_GT((a.select(1, 1) - b.select(1, 1)).abs().max().item<double>(), 1e-4) << "frame with tokens not mixed";
+  EXPECT_GT((a.select(1, 3) - b.select(1, 3)).abs().max().item<double>(), 1e-4);
+}
+
 // With cond_image the diffusion runs on the residual over the coarse frame: a perfect coarse frame leaves nothing
 // to diffuse on frames with tokens, while context frames (no tokens, zero coarse frame) are diffused as themselves.
 TEST(DecoderResidual, TrainingTargetIsTheResidualOverTheCoarseFrame) {

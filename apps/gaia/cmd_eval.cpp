@@ -20,7 +20,7 @@ namespace {
 struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval;
-  int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4;
+  int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   double long_seconds = 60, window_seconds = 10;
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0};
   std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
@@ -44,6 +44,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--frames", e->frames, "generated frames per rollout (action control, futures)");
   cmd->add_option("--futures", e->futures, "futures per prompt (diversity) and per text prompt and setting");
   cmd->add_option("--text-frames", e->text_frames, "frames generated from each text prompt");
+  cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)");
   cmd->add_option("--scales", e->scales, "guidance scales for text control");
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
@@ -80,8 +81,8 @@ void register_eval(CLI::App& app) {
     out.dir = flags->out;
     fs::create_directories(out.dir);
     world::SamplingOptions sampling;
-    sampling.top_k = m.info.config.world.top_k;  // paper §5.1: top-k sampling
-    nlohmann::json j = {{"world", e->world}, {"tokenizer", e->tokenizer}, {"tokens", e->tokens}};
+    sampling.top_k = e->top_k > 0 ? e->top_k : m.info.config.world.top_k;  // paper §5.1: top-k sampling
+    nlohmann::json j = {{"world", e->world}, {"tokenizer", e->tokenizer}, {"tokens", e->tokens}, {"top_k", sampling.top_k}};
     ProgressBar bar(int64_t(parts.size()), "eval");
     int done = 0;
     if (parts.count("action")) {

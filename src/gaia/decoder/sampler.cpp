@@ -38,6 +38,10 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   di.tokens = in.tokens;
   di.cond_image = in.cond_image;
   di.rate = torch::full({B}, in.rate, torch::TensorOptions().dtype(torch::kLong).device(x0.device()));
+  // Image/video mixing applies to the frames decoded from their tokens. A frame with neither tokens nor context
+  // (interpolation) is defined only by its neighbours: with the temporal layers off, the image term would pull it
+  // towards an unconditional sample.
+  const auto mix_w = o.mix_weight * (in.tokens != model->K).flatten(2).any(2).to(x0.dtype()).view({B, T, 1, 1, 1});
   auto v_fn = [&](const torch::Tensor& zt, double t) {
     di.x = ctx * x0 + (1 - ctx) * zt;  // context frames clean, the rest at noise level t
     di.time = (1 - in.context.to(torch::kFloat32)) * float(t);
@@ -45,7 +49,7 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
     auto v = model->forward(di);
     if (in.temporal && o.mix_probability > 0 && mix(rng)) {
       di.temporal = false;  // §5.2: denoise every frame as an image, average with the video prediction
-      v = o.mix_weight * model->forward(di) + (1 - o.mix_weight) * v;
+      v = mix_w * model->forward(di) + (1 - mix_w) * v;
     }
     return v;
   };

@@ -21,7 +21,8 @@ torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
 struct SampleOptions {
   int steps = 50;                // §5.2: 50 DDIM steps
   double mix_probability = 0.25;  // §5.2: per step, with this probability ...
-  double mix_weight = 0.5;        // ... v = w v_image + (1 - w) v_video (temporal layers off for v_image)
+  double mix_weight = 0.5;        // ... v = w v_image + (1 - w) v_video (temporal layers off for v_image), on the
+                                  // frames that have tokens (an interpolated frame has nothing to be an image of)
   uint64_t seed = 0;
 };
 
