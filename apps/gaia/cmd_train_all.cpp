@@ -34,6 +34,8 @@ void register_train_all(CLI::App& app) {
   auto flags = std::make_shared<SharedFlags>();
   auto episodes = std::make_shared<int>(160);
   auto seconds = std::make_shared<double>(30);
+  auto wander_episodes = std::make_shared<int>(80);
+  auto wander = std::make_shared<double>(1.2);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
   // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
@@ -44,6 +46,10 @@ void register_train_all(CLI::App& app) {
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
   cmd->add_option("--seconds", *seconds, "seconds per episode (recipe: 30)");
+  cmd->add_option("--wander-episodes", *wander_episodes,
+                  "further episodes whose driver wanders in its lane (recipe: 80; docs/synth.md: without them the "
+                  "recorded steering is the road's and nothing learns to read it from the actions or the frames)");
+  cmd->add_option("--wander", *wander, "their lateral wander, m (recipe: 1.2)");
   cmd->add_option("--ship", *ship, "also write fp16 copies of the final weights into this directory (e.g. models)");
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
@@ -73,6 +79,10 @@ void register_train_all(CLI::App& app) {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
          out / "synth" / ".complete"},
+        {"data-wander",
+         with({"synth", "--episodes", std::to_string(*wander_episodes), "--first", std::to_string(*episodes), "--seconds",
+               fmt::format("{}", *seconds), "--seed", "1", "--wander", fmt::format("{}", *wander), "--out", synth}),
+         out / "synth" / ".complete-wander"},
         {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
                             "--out", (out / "tokenizer").string()}),
          out / "tokenizer" / "tokenizer.safetensors"},
@@ -94,6 +104,8 @@ void register_train_all(CLI::App& app) {
          with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
          out / "probe-dynamics" / "probe-dynamics.safetensors"},
     };
+    if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
+    if (*wander_episodes == 0) stages.erase(stages.begin() + 1);
     if (!*skip_eval) {
       stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
                         out / "world-eval" / "eval.json"});
@@ -136,7 +148,7 @@ void register_train_all(CLI::App& app) {
       const int rc = run_gaia_child(s.args);
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (rc != 0) fail("train-all: stage '{}' failed (exit {}); fix it and run the same command again to resume", s.name, rc);
-      if (s.name == "data") write_file_atomic(s.done, "");  // gaia synth has no single final file of its own
+      if (s.name.rfind("data", 0) == 0) write_file_atomic(s.done, "");  // gaia synth has no single final file
       std::printf("[%zu/%zu] %s: finished in %.1f min\n", i + 1, stages.size(), s.name.c_str(), secs / 60);
       log.push_back({{"stage", s.name}, {"command", line}, {"seconds", secs}});
       write_file_atomic(out / "train-all.json", log.dump(2) + "\n");
