@@ -7,7 +7,9 @@
 #include <set>
 
 #include "gaia/core/config.h"
+#include "gaia/core/error.h"
 #include "gaia/decoder/diffusion.h"
+#include "gaia/decoder/evaluate.h"
 #include "gaia/decoder/sampler.h"
 #include "gaia/decoder/tasks.h"
 #include "gaia/decoder/trainer.h"
@@ -337,6 +339,24 @@ TEST(DecoderVideo, ForwardAndWindowAreRepeatable) {
   NoiseSchedule sch;
   auto a = sample_window(m, sch, w, o), b = sample_window(m, sch, w, o);
   EXPECT_TRUE(torch::equal(a, b)) << (a - b).abs().max().item<float>();
+}
+
+// Flicker (the issue's: change of the generated frames minus the truth's) against the temporal error (how far each
+// generated change is from the true one): a blurred but steady decoder has negative flicker yet a temporal error
+// as large as the truth's motion it misses; per-frame noise shows in both; the truth itself scores 0.
+TEST(DecoderEval, FlickerAndTemporalError) {
+  torch::manual_seed(11);
+  auto x = (torch::rand({6, 3, 16, 32}) * 2 - 1) * 0.8;
+  EXPECT_DOUBLE_EQ(temporal_error(x, x), 0.0);
+  EXPECT_NEAR(temporal_change(x + 0.1), temporal_change(x), 1e-5);  // a constant offset changes nothing
+  EXPECT_NEAR(temporal_error(x + 0.1, x), 0.0, 1e-5);
+  auto frozen = x.select(0, 0).unsqueeze(0).expand_as(x).contiguous();  // one frame repeated
+  EXPECT_DOUBLE_EQ(temporal_change(frozen), 0.0);                     // flicker = -change(x) < 0 ...
+  EXPECT_NEAR(temporal_error(frozen, x), temporal_change(x), 1e-4);    // ... but every true change is missed
+  auto noisy = x + 0.1 * torch::randn_like(x);                         // independent per-frame errors
+  EXPECT_GT(temporal_error(noisy, x), 0.1 * 127.5 * 0.9);              // E|n1 - n2| = 0.1 * 2 / sqrt(pi) ~ 0.113
+  EXPECT_LT(temporal_error(noisy, x), 0.1 * 127.5 * 1.4);
+  EXPECT_THROW(temporal_error(x, x.slice(0, 1)), gaia::Error);
 }
 
 // §5.2 mixing: with probability 1 every step averages in the image (temporal-off) prediction, but only on frames

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/geofence.h"
@@ -14,6 +15,14 @@ namespace gaia::decoder {
 double temporal_change(const torch::Tensor& f) {
   if (f.size(0) < 2) return 0.0;
   return ((f.slice(0, 1) - f.slice(0, 0, -1)).abs().mean().item<double>()) * 127.5;
+}
+
+double temporal_error(const torch::Tensor& f, const torch::Tensor& x) {
+  if (f.sizes() != x.sizes()) fail("temporal_error: frames {} and truth {} differ in shape", shape_str(f.sizes().vec()),
+                                   shape_str(x.sizes().vec()));
+  if (f.size(0) < 2) return 0.0;
+  auto df = f.clamp(-1, 1).slice(0, 1) - f.clamp(-1, 1).slice(0, 0, -1), dx = x.slice(0, 1) - x.slice(0, 0, -1);
+  return (df - dx).abs().mean().item<double>() * 127.5;
 }
 
 double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b) {
@@ -57,7 +66,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["token_frames"] = N;
   out["frames_25hz"] = M;
   std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
-  std::map<int, std::vector<double>> dif_key, dif_all, dif_key_change, dif_all_change, secs;
+  std::vector<double> tok_key_err, tok_all_err;
+  std::map<int, std::vector<double>> dif_key, dif_all, dif_key_change, dif_all_change, dif_key_err, dif_all_err, secs;
   for (size_t c = 0; c < refs.size(); ++c) {
     auto clip = load_clips(episodes, {refs[c]}, tok, true, dev);  // all 25 Hz frames, their tokens and decodings
     auto gt = clip.frames[0];                                      // [M, 3, H, W]
@@ -70,6 +80,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     gt_all_change.push_back(temporal_change(gt));
     tok_key_change.push_back(temporal_change(tok_dec.index_select(0, key)));
     tok_all_change.push_back(temporal_change(tok_dec));
+    tok_key_err.push_back(temporal_error(tok_dec.index_select(0, key), gt_key));
+    tok_all_err.push_back(temporal_error(tok_dec, gt));
     auto tokens = clip.tokens.index_select(1, key);  // [1, N, h, w]
     auto cond = model->cfg.cond_image ? clip.cond.index_select(1, key) : torch::Tensor();
     for (int s : o.steps) {
@@ -84,6 +96,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
       dif_all[s].push_back(psnr_pm1(video, gt));
       dif_key_change[s].push_back(temporal_change(video.index_select(0, key)));
       dif_all_change[s].push_back(temporal_change(video));
+      dif_key_err[s].push_back(temporal_error(video.index_select(0, key), gt_key));
+      dif_all_err[s].push_back(temporal_error(video, gt));
     }
   }
   auto mean = [](const std::vector<double>& v) {
@@ -95,6 +109,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["ground_truth"] = {{"change_6.25hz", gk}, {"change_25hz", ga}};
   out["tokenizer_decoder"] = {{"psnr_6.25hz", mean(tok_key)}, {"psnr_25hz", mean(tok_all)},
                               {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(tok_all_change) - ga},
+                              {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(tok_all_err)},
                               {"note", "frame by frame from every frame's own tokens (at 25 Hz it gets 4x the tokens)"}};
   for (int s : o.steps) {
     const double sec = mean(secs[s]);
@@ -104,6 +119,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
         {"psnr_25hz", mean(dif_all[s])},
         {"flicker_6.25hz", mean(dif_key_change[s]) - gk},
         {"flicker_25hz", mean(dif_all_change[s]) - ga},
+        {"temporal_error_6.25hz", mean(dif_key_err[s])},
+        {"temporal_error_25hz", mean(dif_all_err[s])},
         {"seconds_per_clip", sec},
         {"seconds_per_ddim_step", sec / (windows * s)},  // one step of one T'-frame window (mixing included)
         {"seconds_per_output_second", sec / ((M - 1) / 25.0)}};

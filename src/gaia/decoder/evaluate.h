@@ -16,6 +16,12 @@ namespace gaia::decoder {
 // Mean absolute difference between consecutive frames (0-255 scale), averaged over the sequence; frames [M, 3, H, W]
 // in [-1, 1]. The flicker is this for the generated frames minus this for the ground truth.
 double temporal_change(const torch::Tensor& frames);
+// Mean absolute difference between the generated and the true frame-to-frame change, |(g[t+1] - g[t]) -
+// (x[t+1] - x[t])| (0-255 scale): temporal inconsistency that motion does not explain. The flicker is a
+// difference of magnitudes, so a decoder whose frames are blurred (changing less than the truth) scores below 0
+// however much its errors jump from frame to frame; this one counts those jumps, and is 0 only when every change
+// is the true one.
+double temporal_error(const torch::Tensor& frames, const torch::Tensor& truth);
 // PSNR between images in [-1, 1] (the first is clamped), on the [0, 1] scale.
 double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b);
 
