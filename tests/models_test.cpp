@@ -29,16 +29,22 @@ fs::path fresh_synth(const test::TempDir& d, const std::string& extra, const std
   return d / "ds";
 }
 
+// A shipped probe's scores on a dataset (stride: frames between the two frames of a dynamics example, 0 for scene).
+nlohmann::json probe_scores(const std::string& weights, const fs::path& ds_dir, int stride, int examples) {
+  data::Dataset ds(ds_dir);
+  auto net = probe::load_probe(model(weights), torch::kCPU);
+  auto set = probe::example_set(ds, ds.ids(), stride, examples);
+  return probe::score(net->kind, probe::predict(net, set, stride, torch::kCPU),
+                      probe::targets(net->kind, set.episodes, set.examples, stride));
+}
+
 }  // namespace
 
 TEST(ShippedModels, SceneProbeReadsWeatherAndTimeOfDay) {
   if (!fs::exists(model("probe-scene.safetensors"))) GTEST_SKIP() << "models/probe-scene.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, "", {{"clear", "day"}, {"rain", "night"}, {"fog", "dusk"}, {"snow", "day"}, {"overcast", "dusk"}});
-  data::Dataset ds(ds_dir);
-  auto net = probe::load_probe(model("probe-scene.safetensors"), torch::kCPU);
-  auto set = probe::example_set(ds, ds.ids(), 0, 200);
-  auto s = probe::score(net->kind, probe::predict(net, set, 0, torch::kCPU), probe::targets(net->kind, set.episodes, set.examples, 0));
+  auto s = probe_scores("probe-scene.safetensors", ds_dir, 0, 200);
   EXPECT_GE(s["time_of_day_accuracy"].get<double>(), 0.9) << s.dump();
   EXPECT_GE(s["weather_accuracy"].get<double>(), 0.7) << s.dump();
 }
@@ -47,10 +53,7 @@ TEST(ShippedModels, DynamicsProbeReadsSteeringAndSpeed) {
   if (!fs::exists(model("probe-dynamics.safetensors"))) GTEST_SKIP() << "models/probe-dynamics.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, " --scene bend", {{"clear", "day"}, {"overcast", "day"}, {"clear", "dusk"}});
-  data::Dataset ds(ds_dir);
-  auto net = probe::load_probe(model("probe-dynamics.safetensors"), torch::kCPU);
-  auto set = probe::example_set(ds, ds.ids(), 4, 200);
-  auto s = probe::score(net->kind, probe::predict(net, set, 4, torch::kCPU), probe::targets(net->kind, set.episodes, set.examples, 4));
+  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 4, 200);
   EXPECT_GE(s["speed_spearman"].get<double>(), 0.6) << s.dump();
   EXPECT_GE(s["steering_sign_accuracy"].get<double>(), 0.8) << s.dump();
 }
@@ -62,10 +65,7 @@ TEST(ShippedModels, DynamicsProbeReadsWanderingSteering) {
   if (!fs::exists(model("probe-dynamics.safetensors"))) GTEST_SKIP() << "models/probe-dynamics.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, " --wander 1.2", {{"clear", "day"}, {"overcast", "dusk"}, {"rain", "day"}});
-  data::Dataset ds(ds_dir);
-  auto net = probe::load_probe(model("probe-dynamics.safetensors"), torch::kCPU);
-  auto set = probe::example_set(ds, ds.ids(), 4, 300);
-  auto s = probe::score(net->kind, probe::predict(net, set, 4, torch::kCPU), probe::targets(net->kind, set.episodes, set.examples, 4));
+  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 4, 300);
   std::cout << s.dump() << "\n";
   EXPECT_GE(s["curvature_spearman"].get<double>(), 0.6) << s.dump();
   EXPECT_GE(s["steering_sign_accuracy"].get<double>(), 0.8) << s.dump();
