@@ -79,10 +79,6 @@ void register_train_all(CLI::App& app) {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
          out / "synth" / ".complete"},
-        {"data-wander",
-         with({"synth", "--episodes", std::to_string(*wander_episodes), "--first", std::to_string(*episodes), "--seconds",
-               fmt::format("{}", *seconds), "--seed", "1", "--wander", fmt::format("{}", *wander), "--out", synth}),
-         out / "synth" / ".complete-wander"},
         {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
                             "--out", (out / "tokenizer").string()}),
          out / "tokenizer" / "tokenizer.safetensors"},
@@ -105,7 +101,13 @@ void register_train_all(CLI::App& app) {
          out / "probe-dynamics" / "probe-dynamics.safetensors"},
     };
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
-    if (*wander_episodes == 0) stages.erase(stages.begin() + 1);
+    if (*wander_episodes > 0)  // right after the lane-keeping data, into the same dataset
+      stages.insert(stages.begin() + 1,
+                    {"data-wander",
+                     with({"synth", "--episodes", std::to_string(*wander_episodes), "--first", std::to_string(*episodes),
+                           "--seconds", fmt::format("{}", *seconds), "--seed", "1", "--wander", fmt::format("{}", *wander),
+                           "--out", synth}),
+                     out / "synth" / ".complete-wander"});
     if (!*skip_eval) {
       stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
                         out / "world-eval" / "eval.json"});

@@ -21,7 +21,8 @@ double temporal_error(const torch::Tensor& f, const torch::Tensor& x) {
   if (f.sizes() != x.sizes()) fail("temporal_error: frames {} and truth {} differ in shape", shape_str(f.sizes().vec()),
                                    shape_str(x.sizes().vec()));
   if (f.size(0) < 2) return 0.0;
-  auto df = f.clamp(-1, 1).slice(0, 1) - f.clamp(-1, 1).slice(0, 0, -1), dx = x.slice(0, 1) - x.slice(0, 0, -1);
+  const auto g = f.clamp(-1, 1);
+  auto df = g.slice(0, 1) - g.slice(0, 0, -1), dx = x.slice(0, 1) - x.slice(0, 0, -1);
   return (df - dx).abs().mean().item<double>() * 127.5;
 }
 
@@ -74,13 +75,14 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     auto key = torch::arange(0, M, 4, torch::kLong).to(dev);       // the 6.25 Hz frames
     auto gt_key = gt.index_select(0, key);
     auto tok_dec = clip.cond[0];  // the tokenizer decoder on every frame's own tokens
-    tok_key.push_back(psnr_pm1(tok_dec.index_select(0, key), gt_key));
+    auto tok_dec_key = tok_dec.index_select(0, key);
+    tok_key.push_back(psnr_pm1(tok_dec_key, gt_key));
     tok_all.push_back(psnr_pm1(tok_dec, gt));
     gt_key_change.push_back(temporal_change(gt_key));
     gt_all_change.push_back(temporal_change(gt));
-    tok_key_change.push_back(temporal_change(tok_dec.index_select(0, key)));
+    tok_key_change.push_back(temporal_change(tok_dec_key));
     tok_all_change.push_back(temporal_change(tok_dec));
-    tok_key_err.push_back(temporal_error(tok_dec.index_select(0, key), gt_key));
+    tok_key_err.push_back(temporal_error(tok_dec_key, gt_key));
     tok_all_err.push_back(temporal_error(tok_dec, gt));
     auto tokens = clip.tokens.index_select(1, key);  // [1, N, h, w]
     auto cond = model->cfg.cond_image ? clip.cond.index_select(1, key) : torch::Tensor();
@@ -92,11 +94,12 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
         if (progress) progress(done, total);
       })[0];
       secs[s].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-      dif_key[s].push_back(psnr_pm1(video.index_select(0, key), gt_key));
+      auto video_key = video.index_select(0, key);
+      dif_key[s].push_back(psnr_pm1(video_key, gt_key));
       dif_all[s].push_back(psnr_pm1(video, gt));
-      dif_key_change[s].push_back(temporal_change(video.index_select(0, key)));
+      dif_key_change[s].push_back(temporal_change(video_key));
       dif_all_change[s].push_back(temporal_change(video));
-      dif_key_err[s].push_back(temporal_error(video.index_select(0, key), gt_key));
+      dif_key_err[s].push_back(temporal_error(video_key, gt_key));
       dif_all_err[s].push_back(temporal_error(video, gt));
     }
   }

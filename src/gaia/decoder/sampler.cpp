@@ -41,13 +41,15 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   // Image/video mixing applies to the frames decoded from their tokens. A frame with neither tokens nor context
   // (interpolation) is defined only by its neighbours: with the temporal layers off, the image term would pull it
   // towards an unconditional sample.
-  const auto mix_w = o.mix_weight * (in.tokens != model->K).flatten(2).any(2).to(x0.dtype()).view({B, T, 1, 1, 1});
+  const auto has_tokens = (in.tokens != model->K).flatten(2).any(2);  // [B, T]
+  const bool any_tokens = has_tokens.any().item<bool>();  // upsampling windows have none: skip the image pass
+  const auto mix_w = o.mix_weight * has_tokens.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto v_fn = [&](const torch::Tensor& zt, double t) {
     di.x = ctx * x0 + (1 - ctx) * zt;  // context frames clean, the rest at noise level t
     di.time = (1 - in.context.to(torch::kFloat32)) * float(t);
     di.temporal = in.temporal;
     auto v = model->forward(di);
-    if (in.temporal && o.mix_probability > 0 && mix(rng)) {
+    if (in.temporal && o.mix_probability > 0 && mix(rng) && any_tokens) {  // the draw happens either way
       di.temporal = false;  // §5.2: denoise every frame as an image, average with the video prediction
       v = mix_w * model->forward(di) + (1 - mix_w) * v;
     }
