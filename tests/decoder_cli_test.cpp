@@ -109,3 +109,34 @@ TEST(DecoderCli, BadInputsAreClearErrors) {
   EXPECT_NE(r.output.find("not a gaia video decoder"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x.mp4"));
 }
+
+// Fine-tuning (--init): with a zero learning rate the run keeps the given weights (up to the EMA's rounding); a file
+// that is not a video decoder is one clear error.
+TEST(DecoderCli, InitStartsFromTheGivenWeights) {
+  auto& p = DecoderPipeline::get();
+  const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --val-every 100";
+  auto r = test::run_gaia(base + " --steps 2 --out " + q(p.dir / "init-base"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto init = p.dir / "init-base" / "decoder.safetensors";
+  r = test::run_gaia(base + " --steps 2 --seed 7 --set decoder.lr=0 --set decoder.final_lr=0 --init " + q(init) +
+                     " --out " + q(p.dir / "init-tuned"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("initialised from"), std::string::npos) << r.output;
+  SafetensorsFile a(init), b(p.dir / "init-tuned" / "decoder.safetensors");
+  ASSERT_EQ(a.names(), b.names());
+  for (const auto& n : a.names())
+    ASSERT_TRUE(torch::allclose(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)), 1e-5, 1e-6)) << n;
+  // Without --init the other seed gives other weights: the comparison above is not vacuous.
+  r = test::run_gaia(base + " --steps 2 --seed 7 --set decoder.lr=0 --set decoder.final_lr=0 --out " +
+                     q(p.dir / "init-fresh"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile c(p.dir / "init-fresh" / "decoder.safetensors");
+  bool differs = false;
+  for (const auto& n : a.names())
+    differs = differs || !torch::allclose(tensor_from_view(a.get(n)), tensor_from_view(c.get(n)), 1e-3, 1e-3);
+  EXPECT_TRUE(differs);
+  r = test::run_gaia(base + " --steps 2 --init " + q(p.tok / "tokenizer.safetensors") + " --out " + q(p.dir / "init-bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("not a gaia video decoder"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "init-bad" / "decoder.safetensors"));
+}

@@ -5,17 +5,20 @@
 #include <map>
 #include <random>
 #include <set>
+#include <sstream>
 
 #include "gaia/core/config.h"
 #include "gaia/core/error.h"
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/evaluate.h"
+#include "gaia/decoder/io.h"
 #include "gaia/decoder/sampler.h"
 #include "gaia/decoder/tasks.h"
 #include "gaia/decoder/trainer.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/decoder/video.h"
 #include "gaia/plan/plan.h"
+#include "gaia/torch/tensor_io.h"
 #include "gaia/train/ema.h"
 #include "test_util.h"
 
@@ -390,12 +393,20 @@ TEST(DecoderVideo, ImageVideoMixingOnlyTouchesFramesWithTokens) {
 
 // With cond_image the diffusion runs on the residual over the coarse frame: a perfect coarse frame leaves nothing
 // to diffuse on frames with tokens, while context frames (no tokens, zero coarse frame) are diffused as themselves.
-TEST(DecoderResidual, TrainingTargetIsTheResidualOverTheCoarseFrame) {
-  torch::manual_seed(3);
-  const int64_t B = 2, T = 5, H = 16, W = 32, D = 8;
+// Two random clips of T frames at 16x32 with 2x4 token grids (K = 16) and a random coarse frame.
+static Clips random_clips(uint64_t seed, int64_t T) {
+  torch::manual_seed(seed);
+  const int64_t B = 2, H = 16, W = 32, D = 8;
   Clips c;
   c.frames = torch::rand({B, T, 3, H, W}) * 2 - 1;
   c.tokens = torch::randint(0, 16, {B, T, H / D, W / D}, torch::kLong);
+  c.cond = torch::rand({B, T, 3, H, W}) * 2 - 1;
+  return c;
+}
+
+TEST(DecoderResidual, TrainingTargetIsTheResidualOverTheCoarseFrame) {
+  const int64_t T = 5, D = 8;
+  Clips c = random_clips(3, T);
   c.cond = c.frames.clone();
   NoiseSchedule sch;
   auto masks = task_masks(Task::kForward, int(T));
@@ -437,4 +448,89 @@ TEST(DecoderResidual, SamplerAddsTheCoarseFrameBack) {
   auto inside = (gen.abs() < 0.999) & (gen0.abs() < 0.999);  // away from the final clamp
   ASSERT_GT(inside.sum().item<int64_t>(), 1000);
   EXPECT_LT(((gen - gen0 - base) * inside).abs().max().item<double>(), 1e-5);
+}
+
+// decoder.interp_base: a frame with neither tokens nor context starts from the blend of its nearest context frames
+// (linear in time), or a copy of the one it has; frames with tokens, context frames and rows without any context
+// are left as they were.
+TEST(DecoderResidual, InterpolationBaseBlendsTheContextNeighbours) {
+  const int64_t T = 6;
+  auto frames = torch::arange(T, torch::kFloat32).view({1, T, 1, 1, 1}).expand({2, T, 3, 4, 8}).clone() * 0.3 - 0.7;
+  auto cond = torch::full_like(frames, 0.05);
+  auto ctx = torch::tensor({1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f}).view({2, T});
+  auto tok = torch::tensor({0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}).view({2, T}).to(torch::kBool);
+  auto out = interpolation_base(cond, frames, ctx, tok);
+  auto f = [&](int64_t t) { return frames[0][t]; };
+  EXPECT_TRUE(torch::equal(out[0][0], cond[0][0])) << "context frame";
+  EXPECT_TRUE(torch::equal(out[0][1], cond[0][1])) << "frame with tokens";
+  EXPECT_TRUE(torch::allclose(out[0][2], f(0) / 3 + f(3) * 2 / 3)) << "2/3 of the way from frame 0 to frame 3";
+  EXPECT_TRUE(torch::equal(out[0][4], f(3))) << "after the last context frame: a copy of it";
+  EXPECT_TRUE(torch::equal(out[0][5], f(3)));
+  EXPECT_TRUE(torch::equal(out[1], cond[1])) << "no context at all: nothing to blend";
+}
+
+// The interpolate task trains on the same base the upsampling windows use at inference.
+TEST(DecoderResidual, InterpolateTaskDiffusesTheResidualOverTheBlend) {
+  const int64_t T = 7, D = 8;
+  Clips c = random_clips(4, T);
+  NoiseSchedule sch;
+  auto masks = task_masks(Task::kInterpolate, int(T));
+  auto on = make_task_batch(c, masks, 2, 0.5, 0.0, sch, 16, D, true);
+  auto off = make_task_batch(c, masks, 2, 0.5, 0.0, sch, 16, D, false);
+  auto tt = torch::full({1}, 0.5);
+  auto r_on = x_from_v(on.input.x, on.v_true, sch.alpha(tt), sch.sigma(tt));
+  for (int64_t t = 1; t < T; t += 2) {
+    auto blend = (c.frames.select(1, t - 1) + c.frames.select(1, t + 1)) / 2;
+    EXPECT_TRUE(torch::allclose(on.input.cond_image.select(1, t), blend, 1e-5, 1e-6)) << "frame " << t;
+    EXPECT_EQ(off.input.cond_image.select(1, t).abs().max().item<float>(), 0.0f) << "off: no coarse frame";
+    EXPECT_TRUE(torch::allclose(r_on.select(1, t), c.frames.select(1, t) - blend, 1e-4, 1e-4)) << "residual " << t;
+  }
+}
+
+TEST(DecoderResidual, SamplerStartsInBetweenFramesFromTheBlend) {
+  Config c = tiny();
+  ASSERT_TRUE(c.decoder.interp_base);
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v = 0
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 6);
+  WindowInput w;
+  w.frames = in.x.clamp(-1, 1) * 0.5;
+  w.context = torch::tensor({1.f, 0.f, 1.f, 0.f, 1.f}).unsqueeze(0);
+  w.tokens = torch::full_like(in.tokens, m->K);  // upsampling: no tokens anywhere
+  w.cond_image = torch::zeros_like(in.x);
+  SampleOptions o;
+  o.steps = 3;
+  NoiseSchedule sch;
+  auto a = sample_window(m, sch, w, o);
+  m->cfg.interp_base = false;
+  auto b = sample_window(m, sch, w, o);
+  for (int64_t t : {1, 3}) {
+    auto blend = (w.frames.select(1, t - 1) + w.frames.select(1, t + 1)) / 2;
+    auto ga = a.select(1, t), gb = b.select(1, t);
+    auto inside = (ga.abs() < 0.999) & (gb.abs() < 0.999);
+    ASSERT_GT(inside.sum().item<int64_t>(), 1000);
+    EXPECT_LT(((ga - gb - blend) * inside).abs().max().item<double>(), 1e-5) << "frame " << t;
+  }
+}
+
+// Decoder files from before decoder.interp_base were trained with zero coarse frames between known ones: they load
+// with it off; files saved now keep what they were trained with.
+TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
+  test::TempDir dir;
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  save_decoder(m, c, dir.path / "new.safetensors");
+  Config back;
+  load_decoder(dir.path / "new.safetensors", torch::kCPU, &back);
+  EXPECT_TRUE(back.decoder.interp_base);
+  std::string yaml = c.to_yaml(), old;
+  std::istringstream lines(yaml);
+  for (std::string l; std::getline(lines, l);)
+    if (l.find("interp_base") == std::string::npos) old += l + "\n";
+  ASSERT_NE(old, yaml);
+  save_module(*m, dir.path / "old.safetensors",
+              {{"gaia.component", "decoder"}, {"gaia.config", old}, {"gaia.decoder.K", std::to_string(m->K)},
+               {"gaia.decoder.D", std::to_string(m->D)}});
+  load_decoder(dir.path / "old.safetensors", torch::kCPU, &back);
+  EXPECT_FALSE(back.decoder.interp_base);
 }

@@ -182,11 +182,13 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
                            q(models / "probe-dynamics.safetensors") + " --scene-probe " +
                            q(models / "probe-scene.safetensors") + p.tiny();
   auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames 2 --futures 2" +
-                          " --text-frames 1 --scales 0 2 --long-seconds 2 --window-seconds 1 --out " + q(p.dir / "eval"));
+                          " --text-frames 1 --scales 0 2 --long-seconds 2 --window-seconds 1 --action-guidance 1.5 --out " +
+                          q(p.dir / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
   const auto& a = j["action_control"];
   EXPECT_EQ(a["rollouts"].get<int>(), 2 * 8);  // prompts x commands
+  EXPECT_EQ(a["guidance_scale"].get<double>(), 1.5);
   for (const char* k : {"conditioned", "without_actions", "counterfactual_probe"})
     EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
   EXPECT_GT(a["counterfactual"]["psnr_db"].get<double>(), 5.0);

@@ -269,6 +269,32 @@ TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {
   EXPECT_FALSE(torch::equal(s1.tokens[0], s1.tokens[1]));
 }
 
+// Guidance on the actions alone (no text; `gaia eval --action-guidance`): the unconditional rows see null action
+// tokens, so the guided frame is the argmax of eq. 2 over two plain forward passes, with and without the actions.
+TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
+  Config c = tiny();
+  auto m = small_model(c, 6);
+  const int64_t P = 2, F = 1;
+  const double s = 2;
+  torch::manual_seed(5);
+  RolloutPrompt p;
+  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.actions = torch::randn({P + F, 2}) * 3;
+  RolloutOptions o;
+  o.frames = int(F);
+  o.sampling.strategy = Strategy::Argmax;
+  o.guidance.scale = s;
+  auto r = rollout(m, p, o);
+  torch::NoGradGuard ng;
+  WorldBatch b;
+  b.tokens = r.tokens.repeat({2, 1, 1});  // [2, P + F, n]
+  b.actions = p.actions.unsqueeze(0).repeat({2, 1, 1});
+  b.use_action = torch::tensor({true, false});
+  auto l = m->forward(b).select(1, P);  // [2, n, K]: teacher-forced on the rollout's own tokens
+  EXPECT_FALSE(torch::allclose(l[0], l[1]));  // the two branches differ: the check below is not vacuous
+  EXPECT_TRUE(torch::equal(guide(l[0], l[1], s).argmax(-1), r.tokens[0][P]));
+}
+
 // One batched rollout with a prompt, actions and text per future gives what separate rollouts give (argmax), with
 // and without guidance, including across the sliding window: evaluation runs many prompts x commands this way.
 TEST(WorldRollout, PerFuturePromptsMatchSeparateRollouts) {

@@ -80,6 +80,7 @@ void register_decoder(CLI::App& app) {
     cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
     cmd->add_option("--tokenizer", *tok, "tokenizer weights (frozen; gives the conditioning tokens)")->required();
     cmd->add_option("--steps", o->steps, "total steps (default: config decoder.steps)");
+    cmd->add_option("--init", o->init, "start from these video decoder weights (fine-tuning; ignored when resuming)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, decoder.safetensors, metrics.jsonl)");

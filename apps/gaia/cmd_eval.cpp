@@ -21,7 +21,7 @@ struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval;
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
-  double long_seconds = 60, window_seconds = 10;
+  double action_guidance = 0, long_seconds = 60, window_seconds = 10;
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0};
   std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
 };
@@ -45,6 +45,8 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--futures", e->futures, "futures per prompt (diversity) and per text prompt and setting");
   cmd->add_option("--text-frames", e->text_frames, "frames generated from each text prompt");
   cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)");
+  cmd->add_option("--action-guidance", e->action_guidance,
+                  "classifier-free guidance scale on the commanded actions (action control; 0 = off)");
   cmd->add_option("--scales", e->scales, "guidance scales for text control");
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
@@ -91,6 +93,7 @@ void register_eval(CLI::App& app) {
       o.prompt_frames = e->prompt_frames;
       o.frames = e->frames;
       o.sampling = sampling;
+      o.guidance_scale = e->action_guidance;
       o.seed = uint64_t(run.run.seed);
       j["action_control"] = control::action_control(m, ds, raw.get(), o, out);
       bar.update(++done, "action control");

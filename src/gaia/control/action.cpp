@@ -113,6 +113,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   ro.frames = int(F);
   ro.futures = int(R);
   ro.sampling = o.sampling;
+  ro.guidance.scale = o.guidance_scale;  // the baseline is guided too: towards the prompt's own actions
   ro.seed = o.seed;
   auto with = world::rollout(m.world, cond, ro);
   auto without = world::rollout(m.world, null_actions, ro);
@@ -128,6 +129,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   j["rollouts"] = R;
   j["prompt_frames"] = P;
   j["generated_frames"] = F;
+  j["guidance_scale"] = o.guidance_scale;
   j["generated_frames_per_second"] = double(R * F) / with.seconds;
   j["conditioned"] = agreement(cmd_speed, cmd_curv, rw, all);
   j["conditioned_in_distribution"] = agreement(cmd_speed, cmd_curv, rw, in_dist);

@@ -29,6 +29,9 @@ struct ActionEvalOptions {
   int prompt_frames = 3;      // P
   int frames = 5;             // F generated frames per rollout
   world::SamplingOptions sampling;
+  // Classifier-free guidance on the actions (eq. 2 with null action tokens as the unconditional branch): the
+  // paper guides text; the same mechanism amplifies whatever the model has learned about the commands.
+  double guidance_scale = 0;
   uint64_t seed = 0;
 };
 

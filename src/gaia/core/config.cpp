@@ -134,6 +134,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("decoder.heads", &v.heads));
   f.push_back(field("decoder.token_embed_dim", &v.token_embed_dim));
   f.push_back(field("decoder.cond_image", &v.cond_image));
+  f.push_back(field("decoder.interp_base", &v.interp_base));
   f.push_back(field("decoder.schedule_shift", &v.schedule_shift));
   f.push_back(field("decoder.frames", &v.frames));
   f.push_back(field("decoder.token_dropout", &v.token_dropout));

@@ -86,6 +86,11 @@ struct DecoderConfig {
   // temporal consistency rather than the whole image, which a CPU-sized model can learn in hours. The paper
   // conditions on tokens alone (paper.yaml: false).
   bool cond_image = true;
+  // With cond_image: a frame with neither tokens nor context (the frames between known ones when upsampling
+  // 6.25 -> 12.5 -> 25 Hz) gets as its coarse frame the blend of its nearest context frames in time
+  // (diffusion.h interpolation_base), so the model refines a blend of its neighbours instead of drawing the whole
+  // frame from noise. Decoders saved before this option existed load with it off (they were trained without).
+  bool interp_base = true;
   int frames = 7;                // T'; paper §4.3: T' = 7
   double token_dropout = 0.15;   // paper §2.4: p = 0.15
   int ddim_steps = 50;           // paper §5.2: 50 DDIM steps

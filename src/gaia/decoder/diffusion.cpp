@@ -29,6 +29,31 @@ torch::Tensor ddim_step(const torch::Tensor& xt, const torch::Tensor& v, const t
   return alpha_s * x_hat + sigma_s * eps_hat;
 }
 
+torch::Tensor interpolation_base(const torch::Tensor& cond_image, const torch::Tensor& frames,
+                                 const torch::Tensor& context, const torch::Tensor& has_tokens) {
+  const int64_t B = frames.size(0), T = frames.size(1);
+  auto out = cond_image.clone();
+  auto ctx = context.to(torch::kCPU).to(torch::kFloat32).contiguous();
+  auto tok = has_tokens.to(torch::kCPU).to(torch::kBool).contiguous();
+  auto c = ctx.accessor<float, 2>();
+  auto k = tok.accessor<bool, 2>();
+  for (int64_t b = 0; b < B; ++b)
+    for (int64_t t = 0; t < T; ++t) {
+      if (c[b][t] > 0.5f || k[b][t]) continue;
+      int64_t l = t - 1, r = t + 1;  // nearest context frames on each side
+      while (l >= 0 && c[b][l] <= 0.5f) --l;
+      while (r < T && c[b][r] <= 0.5f) ++r;
+      auto dst = out[b][t];
+      if (l >= 0 && r < T) {
+        const double w = double(t - l) / double(r - l);
+        dst.copy_((1 - w) * frames[b][l] + w * frames[b][r]);
+      } else if (l >= 0 || r < T) {
+        dst.copy_(frames[b][l >= 0 ? l : r]);
+      }
+    }
+  return out;
+}
+
 std::vector<double> ddim_times(int steps) {
   std::vector<double> t(size_t(steps) + 1);
   for (int i = 0; i <= steps; ++i) t[size_t(i)] = 1.0 - double(i) / steps;

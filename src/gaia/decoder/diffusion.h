@@ -58,6 +58,15 @@ inline torch::Tensor coarse_base(const torch::Tensor& cond_image, const torch::T
   return cond_image.defined() ? cond_image : torch::zeros_like(x);
 }
 
+// decoder.interp_base: frames with neither tokens nor context (the frames between known ones in temporal
+// upsampling) have no coarse frame of their own; give them the linear interpolation in time of the nearest context
+// frames on either side (a copy of the one neighbour at an end; left at zero with none). The interpolate task in
+// training and the upsampling windows at inference both go through here, so the two see the same base.
+//   cond_image [B, T, 3, H, W] (zeros where no tokens), frames [B, T, 3, H, W] (clean where context),
+//   context [B, T] (1 = context), has_tokens [B, T] bool -> cond_image with those frames filled.
+torch::Tensor interpolation_base(const torch::Tensor& cond_image, const torch::Tensor& frames,
+                                 const torch::Tensor& context, const torch::Tensor& has_tokens);
+
 // The DDIM time grid: steps + 1 times from 1 down to 0, uniformly spaced.
 std::vector<double> ddim_times(int steps);
 

@@ -24,10 +24,15 @@ torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
 
 torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const WindowInput& in, const SampleOptions& o) {
   torch::NoGradGuard ng;
+  const int64_t B = in.frames.size(0), T = in.frames.size(1);
+  const auto has_tokens = (in.tokens != model->K).flatten(2).any(2);  // [B, T]
+  // Frames between known ones start from the blend of their neighbours (diffusion.h interpolation_base).
+  auto cond_image = in.cond_image;
+  if (cond_image.defined() && model->cfg.interp_base)
+    cond_image = interpolation_base(cond_image, in.frames, in.context, has_tokens);
   // Diffusion runs on the residual over the coarse image (diffusion.h coarse_base); context frames are given as theirs.
-  const auto base = coarse_base(in.cond_image, in.frames);
+  const auto base = coarse_base(cond_image, in.frames);
   const auto x0 = in.frames - base;
-  const int64_t B = x0.size(0), T = x0.size(1);
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
   auto z = torch::randn(x0.sizes(), gen, x0.options().device(torch::kCPU)).to(x0.device());
@@ -36,12 +41,11 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   DenoiserInput di;
   di.context = in.context;
   di.tokens = in.tokens;
-  di.cond_image = in.cond_image;
+  di.cond_image = cond_image;
   di.rate = torch::full({B}, in.rate, torch::TensorOptions().dtype(torch::kLong).device(x0.device()));
   // Image/video mixing applies to the frames decoded from their tokens. A frame with neither tokens nor context
   // (interpolation) is defined only by its neighbours: with the temporal layers off, the image term would pull it
   // towards an unconditional sample.
-  const auto has_tokens = (in.tokens != model->K).flatten(2).any(2);  // [B, T]
   const bool any_tokens = has_tokens.any().item<bool>();  // upsampling windows have none: skip the image pass
   const auto mix_w = o.mix_weight * has_tokens.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto v_fn = [&](const torch::Tensor& zt, double t) {

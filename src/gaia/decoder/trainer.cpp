@@ -46,7 +46,7 @@ Clips load_clips(const std::vector<std::unique_ptr<data::Episode>>& episodes, co
 }
 
 TaskBatch make_task_batch(const Clips& clips, const FrameMasks& masks, int rate, double t, double token_dropout,
-                          const NoiseSchedule& sched, int64_t K, int64_t D) {
+                          const NoiseSchedule& sched, int64_t K, int64_t D, bool interp_base) {
   const auto& x = clips.frames;
   const int64_t B = x.size(0), T = x.size(1), h = clips.tokens.size(2), w = clips.tokens.size(3);
   auto dev = x.device();
@@ -59,6 +59,8 @@ TaskBatch make_task_batch(const Clips& clips, const FrameMasks& masks, int rate,
   if (clips.cond.defined()) {
     auto keep_px = keep.repeat_interleave(D, 2).repeat_interleave(D, 3).unsqueeze(2);  // [B, T, 1, H, W]
     b.input.cond_image = clips.cond * keep_px;
+    if (interp_base)  // the interpolate task's in-between frames: the blend of their context neighbours
+      b.input.cond_image = interpolation_base(b.input.cond_image, x, ctx, has_tok.view({1, T}).expand({B, T}) > 0);
   }
   auto tt = torch::full({B, T}, t, x.options());
   auto time = tt * (1 - ctx);  // context frames are clean: time 0
@@ -153,6 +155,11 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     step = st.step;
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+  } else if (!opt.init.empty()) {
+    // Same architecture required (init_from names the file on a mismatch); fresh optimiser and schedule.
+    train::init_from(*model, *load_decoder(opt.init, dev), opt.init);
+    train::ema_copy(*ema, *model);
+    note("initialised from " + opt.init.string());
   }
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
@@ -172,7 +179,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     double loss = 0, psnr = 0;
     for (double t : {0.25, 0.5, 0.75}) {
       torch::manual_seed(cfg.run.seed + 12345);
-      auto b = make_task_batch(clips, task_masks(Task::kVideo, T), 0, t, 0.0, noise, K, D);
+      auto b = make_task_batch(clips, task_masks(Task::kVideo, T), 0, t, 0.0, noise, K, D, dc.interp_base);
       auto vp = ema->forward(b.input);
       loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
       if (t == 0.5) {
@@ -198,7 +205,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     for (int i = 0; i < dc.batch_size; ++i) refs.push_back(pool[pick(rng)]);
     auto clips = load_clips(train.episodes, refs, tok, dc.cond_image, dev);
     const double t = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
-    auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D);
+    auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D,
+                             dc.interp_base);
     const double lr = sched(step);
     train::set_lr(*optim, lr);
     auto loss = v_loss(model->forward(b.input), b.v_true, b.weight, dc.w_l1, dc.w_l2);

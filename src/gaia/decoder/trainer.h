@@ -38,11 +38,14 @@ struct TaskBatch {
   torch::Tensor v_true;  // [B, T, 3, H, W]
   torch::Tensor weight;  // [B, T] 1 = frame carries loss
 };
+// interp_base: frames with neither tokens nor context get the blend of their context neighbours as their coarse
+// frame (config decoder.interp_base; diffusion.h interpolation_base).
 TaskBatch make_task_batch(const Clips& clips, const FrameMasks& masks, int rate, double t, double token_dropout,
-                          const NoiseSchedule& sched, int64_t K, int64_t D);
+                          const NoiseSchedule& sched, int64_t K, int64_t D, bool interp_base = false);
 
 struct DecoderTrainOptions {
   fs::path dataset, tokenizer, out;  // OUT/checkpoint/, OUT/decoder.safetensors (EMA weights), OUT/metrics.jsonl
+  fs::path init;                     // fine-tuning: start model and EMA from these weights (ignored when resuming)
   int steps = -1;                    // -1: config decoder.steps
   int val_every = 250;
   int val_clips = 8;
