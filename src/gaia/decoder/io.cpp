@@ -22,9 +22,10 @@ VideoUNet load_decoder(const fs::path& path, const torch::Device& device, Config
     auto md = f.metadata();
     if (!md.count("gaia.config") || md["gaia.component"] != "decoder" || !md.count("gaia.decoder.K"))
       fail("{}: not a gaia video decoder weights file (no decoder metadata)", path.string());
+    // Decoders saved before decoder.interp_base existed were trained with zero coarse frames between known ones:
+    // their metadata has no such key, so the value set here stays; newer files set it themselves.
+    c.decoder.interp_base = false;
     c.apply_yaml(md["gaia.config"], path.string() + " [metadata]");
-    // Decoders saved before decoder.interp_base existed were trained with zero coarse frames between known ones.
-    if (md["gaia.config"].find("interp_base") == std::string::npos) c.decoder.interp_base = false;
     c.validate();
     try {
       K = std::stoll(md["gaia.decoder.K"]);
