@@ -78,6 +78,27 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   EXPECT_GT(j["video_decoder"]["2"]["psnr_25hz"].get<double>(), 0);
   EXPECT_GT(j["tokenizer_decoder"]["psnr_6.25hz"].get<double>(), 0);
   EXPECT_GT(j["video_decoder"]["1"]["seconds_per_ddim_step"].get<double>(), 0);
+  EXPECT_EQ(j["noise_correlation"].get<double>(), 0.0);
+
+  // --set reaches the sampling options of the decoder read from its file; its architecture is the file's.
+  r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                     " --clips 1 --token-frames 3 --steps 2 --set decoder.noise_correlation=1" + p.tiny() + " --out " +
+                     q(p.dir / "eval-r1"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j1 = nlohmann::json::parse(read_file(p.dir / "eval-r1" / "eval.json"));
+  EXPECT_EQ(j1["noise_correlation"].get<double>(), 1.0);
+  EXPECT_NE(j1["video_decoder"]["2"]["psnr_25hz"].get<double>(), j["video_decoder"]["2"]["psnr_25hz"].get<double>());
+  r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
+                     q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 1 --set decoder.channels=64" + p.tiny() +
+                     " --out " + q(p.dir / "out2" / "video.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("decoder.channels comes from the weights file"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "out2" / "video.mp4"));
+  r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
+                     q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 1 --set decoder.noise_correlation=2" +
+                     p.tiny() + " --out " + q(p.dir / "out2" / "video.mp4"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("decoder.noise_correlation"), std::string::npos) << r.output;
 }
 
 TEST(DecoderCli, BadInputsAreClearErrors) {

@@ -534,3 +534,55 @@ TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
   load_decoder(dir.path / "old.safetensors", torch::kCPU, &back);
   EXPECT_FALSE(back.decoder.interp_base);
 }
+
+// decoder.noise_correlation: each frame's starting noise stays N(0, I), any two frames of a window are correlated
+// by r, windows of a batch stay independent, and r = 0 is the plain draw (so earlier samples are unchanged).
+TEST(DecoderSampler, StartingNoiseCorrelatesTheFramesOfAWindow) {
+  const std::vector<int64_t> sizes{2, 4, 3, 32, 32};
+  auto g0 = at::detail::createCPUGenerator(5), g1 = at::detail::createCPUGenerator(5);
+  EXPECT_TRUE(torch::equal(starting_noise(sizes, 0.0, g0), torch::randn(sizes, g1, torch::kFloat32)));
+  auto g = at::detail::createCPUGenerator(6);
+  auto z = starting_noise(sizes, 0.6, g).to(torch::kFloat64);
+  auto corr = [](const torch::Tensor& a, const torch::Tensor& b) {
+    auto x = a.flatten() - a.mean(), y = b.flatten() - b.mean();
+    return ((x * y).sum() / (x.norm() * y.norm())).item<double>();
+  };
+  for (int64_t t = 0; t < 4; ++t) {
+    EXPECT_NEAR(z.select(1, t).mean().item<double>(), 0.0, 0.05) << "frame " << t;
+    EXPECT_NEAR(z.select(1, t).std().item<double>(), 1.0, 0.05) << "frame " << t;
+  }
+  EXPECT_NEAR(corr(z.select(1, 0), z.select(1, 2)), 0.6, 0.05);
+  EXPECT_NEAR(corr(z.select(1, 1), z.select(1, 3)), 0.6, 0.05);
+  EXPECT_NEAR(corr(z[0], z[1]), 0.0, 0.05);  // the two windows of the batch
+  auto one = starting_noise(sizes, 1.0, g);
+  EXPECT_TRUE(torch::equal(one.select(1, 0), one.select(1, 3)));
+  EXPECT_NE(test::error_of([&] { starting_noise(sizes, 1.5, g); }).find("decoder.noise_correlation"), std::string::npos);
+  Config c = tiny();
+  c.decoder.noise_correlation = -0.1;
+  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_correlation"), std::string::npos);
+}
+
+// The sampler draws its starting noise with the option: a fresh model (v = 0) maps each frame's noise to its output,
+// so with r = 1 frames with the same coarse image come out equal, and with r = 0 they do not.
+TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v = 0
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 8);
+  WindowInput w;
+  w.frames = torch::zeros_like(in.x);
+  w.context = torch::zeros({1, 5});
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  w.cond_image = (in.cond_image.select(1, 0).unsqueeze(1) * 0.3).expand_as(in.x).contiguous();
+  NoiseSchedule sch;
+  auto o = sample_options(c.decoder, 3, 11);
+  EXPECT_EQ(o.steps, 3);
+  EXPECT_EQ(sample_options(c.decoder, 0, 11).steps, c.decoder.ddim_steps);
+  o.mix_probability = 0;
+  o.noise_correlation = 1.0;
+  auto a = sample_window(m, sch, w, o);
+  EXPECT_LT((a.select(1, 0) - a.select(1, 4)).abs().max().item<double>(), 1e-6);
+  o.noise_correlation = 0.0;
+  auto b = sample_window(m, sch, w, o);
+  EXPECT_GT((b.select(1, 0) - b.select(1, 4)).abs().mean().item<double>(), 0.01);
+}

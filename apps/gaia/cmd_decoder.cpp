@@ -24,6 +24,10 @@ namespace gaia::app {
 
 namespace {
 
+// What --set may change of a trained decoder: how it samples (the rest is fixed by its weights).
+const std::vector<std::string> kDecoderSamplingKeys{"decoder.ddim_steps", "decoder.mix_probability",
+                                                    "decoder.mix_weight", "decoder.noise_correlation"};
+
 // Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
 // dataset episode directory (its tokens.npy) -> int64 [F, N, h, w].
 torch::Tensor read_tokens(const fs::path& p) {
@@ -129,6 +133,7 @@ void register_decoder(CLI::App& app) {
       auto dev = parse_device(run.run.device);
       Config dc;
       auto model = decoder::load_decoder(*weights, dev, &dc);
+      apply_sampling_sets(*flags, "decoder", kDecoderSamplingKeys, *weights, dc);
       auto t = tokenizer::load_tokenizer(*tok, dev);
       if (t->cfg.codebook_size != model->K || t->cfg.downsample != model->D)
         fail("{}: the decoder was trained with K = {}, D = {}; this tokenizer has K = {}, D = {}", *tok, model->K,
@@ -192,7 +197,8 @@ void register_decode(CLI::App& app) {
                                         [&](int d, int total) {
                                           if (!bar) bar = std::make_unique<ProgressBar>(total, "decode");
                                           bar->update(d);
-                                        });
+                                        },
+                                        [&](Config& dc) { apply_sampling_sets(*flags, "decoder", kDecoderSamplingKeys, *weights, dc); });
       if (bar) bar->finish();
       out_fps = *fps;
     }

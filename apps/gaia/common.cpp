@@ -5,6 +5,7 @@
 
 #include <cstdio>
 
+#include <algorithm>
 #include <regex>
 
 #include <opencv2/core.hpp>
@@ -54,6 +55,19 @@ Config resolve_config(const SharedFlags& f) {
   if (!std::regex_match(c.run.device, dev_re)) fail("--device '{}': expected cpu, cuda or cuda:N", c.run.device);
   c.validate();
   return c;
+}
+
+void apply_sampling_sets(const SharedFlags& f, const std::string& section, const std::vector<std::string>& sampling_keys,
+                         const std::string& weights, Config& model_cfg) {
+  for (auto& kv : f.sets) {
+    const std::string key = kv.substr(0, kv.find('='));
+    if (std::find(sampling_keys.begin(), sampling_keys.end(), key) != sampling_keys.end())
+      model_cfg.set(kv);
+    else if (key.rfind(section + ".", 0) == 0)
+      fail("--set {}: {} comes from the weights file {}; here only {} can be set", kv, key, weights,
+           fmt::join(sampling_keys, ", "));
+  }
+  model_cfg.validate();
 }
 
 void apply_threads(const Config& c) {

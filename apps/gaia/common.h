@@ -24,6 +24,12 @@ void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help
 // Config from --config (or defaults), then --set overrides, then --device/--threads/--seed; validated.
 Config resolve_config(const SharedFlags& f);
 
+// A weights file fixes its model's config, except for how the model is sampled: applies the --set overrides of
+// `sampling_keys` (e.g. decoder.noise_correlation) to `model_cfg`, the config read from `weights`. Any other --set
+// key under `section` (e.g. decoder.channels) is an error naming the file: the weights decide it.
+void apply_sampling_sets(const SharedFlags& f, const std::string& section, const std::vector<std::string>& sampling_keys,
+                         const std::string& weights, Config& model_cfg);
+
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
 

@@ -55,9 +55,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   if (refs.empty()) fail("{}: no held-out episode has {} frames at 25 Hz for a {}-frame token clip", dataset.string(), M, N);
   NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
   DecodeOptions d;
-  d.sample.mix_probability = cfg.decoder.mix_probability;
-  d.sample.mix_weight = cfg.decoder.mix_weight;
-  d.sample.seed = o.seed;
+  d.sample = sample_options(cfg.decoder, 0, o.seed);
   const int windows = count_windows(N, cfg.decoder.frames, 6.25, 25.0);
   int total = 0, done = 0;
   for (int s : o.steps) total += int(refs.size()) * windows * s;
@@ -66,6 +64,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["clips"] = refs.size();
   out["token_frames"] = N;
   out["frames_25hz"] = M;
+  out["noise_correlation"] = d.sample.noise_correlation;
   std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
   std::vector<double> tok_key_err, tok_all_err;
   std::map<int, std::vector<double>> dif_key, dif_all, dif_key_change, dif_all_change, dif_key_err, dif_all_err, secs;

@@ -23,17 +23,16 @@ torch::Tensor coarse_frames(tokenizer::ImageTokenizer& tok, const torch::Tensor&
 
 torch::Tensor diffusion_decode(tokenizer::ImageTokenizer& tok, const fs::path& weights, const torch::Tensor& ids,
                                const torch::Tensor& coarse, int steps, double token_fps, double out_fps, uint64_t seed,
-                               const torch::Device& dev, const std::function<void(int, int)>& progress) {
+                               const torch::Device& dev, const std::function<void(int, int)>& progress,
+                               const std::function<void(Config&)>& configure) {
   Config dc;
   auto model = load_decoder(weights, dev, &dc);
+  if (configure) configure(dc);
   if (model->K != tok->cfg.codebook_size || model->D != tok->cfg.downsample)
     fail("{}: the decoder was trained with K = {}, D = {}; the tokenizer has K = {}, D = {}", weights.string(),
          model->K, model->D, tok->cfg.codebook_size, tok->cfg.downsample);
   DecodeOptions o;
-  o.sample.steps = steps > 0 ? steps : dc.decoder.ddim_steps;
-  o.sample.mix_probability = dc.decoder.mix_probability;
-  o.sample.mix_weight = dc.decoder.mix_weight;
-  o.sample.seed = seed;
+  o.sample = sample_options(dc.decoder, steps, seed);
   o.token_fps = token_fps;
   o.out_fps = out_fps;
   NoiseSchedule sched{-15.0, 15.0, dc.decoder.schedule_shift};

@@ -18,10 +18,12 @@ torch::Tensor coarse_frames(tokenizer::ImageTokenizer& tok, const torch::Tensor&
 
 // Video decoder on [F, N, h, w] tokens at token_fps -> [F, M, 3, H, W] at out_fps (M = N, 2N - 1 or 4N - 3).
 // `steps` <= 0 uses the decoder's configured DDIM steps. Errors name `weights` when the decoder does not fit the
-// tokenizer (K, D).
+// tokenizer (K, D). `configure`, when given, adjusts the config read from `weights` before sampling (the user's
+// sampling overrides, e.g. decoder.noise_correlation).
 torch::Tensor diffusion_decode(tokenizer::ImageTokenizer& tok, const fs::path& weights, const torch::Tensor& ids,
                                const torch::Tensor& coarse, int steps, double token_fps, double out_fps, uint64_t seed,
-                               const torch::Device& dev, const std::function<void(int, int)>& progress = {});
+                               const torch::Device& dev, const std::function<void(int, int)>& progress = {},
+                               const std::function<void(Config&)>& configure = {});
 
 // [F, M, 3, H, W] -> M BGR frames with the F futures side by side.
 std::vector<cv::Mat> side_by_side(const torch::Tensor& video);

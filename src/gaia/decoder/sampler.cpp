@@ -1,5 +1,7 @@
 #include "gaia/decoder/sampler.h"
 
+#include <cmath>
+
 #include "gaia/core/error.h"
 #include "gaia/decoder/tasks.h"
 
@@ -22,6 +24,27 @@ torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
   return z;
 }
 
+torch::Tensor starting_noise(at::IntArrayRef sizes, double correlation, at::Generator& gen) {
+  if (!(correlation >= 0 && correlation <= 1)) fail("decoder.noise_correlation must be in [0, 1], got {}", correlation);
+  if (sizes.size() < 2) fail("decoder: starting noise needs [B, T, ...], got {} dimensions", sizes.size());
+  auto z = torch::randn(sizes, gen, torch::kFloat32);
+  if (correlation == 0) return z;
+  auto shared_sizes = sizes.vec();
+  shared_sizes[1] = 1;  // [B, 1, ...]: one draw for every frame of the window, after z so r = 0 is unchanged
+  auto shared = torch::randn(shared_sizes, gen, torch::kFloat32);
+  return std::sqrt(correlation) * shared + std::sqrt(1 - correlation) * z;
+}
+
+SampleOptions sample_options(const DecoderConfig& cfg, int steps, uint64_t seed) {
+  SampleOptions o;
+  o.steps = steps > 0 ? steps : cfg.ddim_steps;
+  o.mix_probability = cfg.mix_probability;
+  o.mix_weight = cfg.mix_weight;
+  o.noise_correlation = cfg.noise_correlation;
+  o.seed = seed;
+  return o;
+}
+
 torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const WindowInput& in, const SampleOptions& o) {
   torch::NoGradGuard ng;
   const int64_t B = in.frames.size(0), T = in.frames.size(1);
@@ -35,7 +58,7 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   const auto x0 = in.frames - base;
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
-  auto z = torch::randn(x0.sizes(), gen, x0.options().device(torch::kCPU)).to(x0.device());
+  auto z = starting_noise(x0.sizes(), o.noise_correlation, gen).to(x0.options());
   std::mt19937_64 rng(o.seed ^ 0x9e3779b97f4a7c15ULL);
   std::bernoulli_distribution mix(o.mix_probability);
   DenoiserInput di;

@@ -23,8 +23,20 @@ struct SampleOptions {
   double mix_probability = 0.25;  // §5.2: per step, with this probability ...
   double mix_weight = 0.5;        // ... v = w v_image + (1 - w) v_video (temporal layers off for v_image), on the
                                   // frames that have tokens (an interpolated frame has nothing to be an image of)
+  // Share part of the starting noise between the frames of a window: z_T = sqrt(r) n_shared + sqrt(1 - r) n_frame
+  // (each frame's noise stays N(0, I); frames are correlated by r). DDIM is deterministic from z_T, so detail that
+  // the tokens leave open is drawn alike in neighbouring frames instead of independently (cf. the correlated noise
+  // prior of Ge et al. 2023, used here at sampling time only). 0 = independent noise, as in training.
+  double noise_correlation = 0.0;
   uint64_t seed = 0;
 };
+
+// The starting noise z_T of a window, sizes = [B, T, ...], drawn on the CPU from gen: N(0, I) per frame, and
+// correlation r between any two frames of a window (SampleOptions::noise_correlation); r = 0 is plain randn.
+torch::Tensor starting_noise(at::IntArrayRef sizes, double correlation, at::Generator& gen);
+
+// The sampling options a decoder config sets (§5.2 mixing, noise correlation); steps <= 0 -> cfg.ddim_steps.
+SampleOptions sample_options(const DecoderConfig& cfg, int steps, uint64_t seed);
 
 // One window: context frames are kept as given, the others are generated.
 struct WindowInput {
