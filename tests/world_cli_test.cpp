@@ -117,6 +117,21 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   r = test::run_gaia("generate" + w + " --steer sideways --out " + q(p.dir / "x"));
   EXPECT_NE(r.output.find("sideways"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
+  // The weights fix the model: --set of its architecture is an error, not silently ignored.
+  r = test::run_gaia("world eval " + q(p.tokens) + w + " --set world.n_layers=3 --out " + q(p.dir / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("world.n_layers comes from the weights file"), std::string::npos) << r.output;
+  r = test::run_gaia("generate" + w + " --frames 2 --set world.temperature=0.5 --out " + q(p.dir / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("here only world.top_k can be set"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
+  // ... but its sampling key reaches the sampler: with k = 1 two futures of one prompt are the same.
+  r = test::run_gaia("generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2" +
+                     " --set world.top_k=1 --seed 3 --out " + q(p.dir / "k1"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile f(p.dir / "k1" / "rollout.safetensors");
+  auto t = tensor_from_view(f.get("tokens"));
+  EXPECT_TRUE(torch::equal(t[0], t[1]));
 }
 
 // Fine-tuning (--init): the run starts from the given weights and keeps their text vocabulary, even on data whose

@@ -75,6 +75,7 @@ void register_generate(CLI::App& app) {
     auto dev = parse_device(run.run.device);
     world::WorldInfo info;
     auto model = world::load_world(g->world, dev, &info);
+    apply_sampling_sets(*flags, "world", {"world.top_k"}, g->world, info.config);  // --top-k still wins
     const auto& L = model->layout;
     const int64_t F = g->frames;
     if (F < 1) fail("--frames must be >= 1");

@@ -71,6 +71,7 @@ void register_world(CLI::App& app) {
       auto dev = parse_device(run.run.device);
       world::WorldInfo info;
       auto model = world::load_world(*weights, dev, &info);
+      apply_sampling_sets(*flags, "world", {}, *weights, info.config);
       world::TokenDataset ds(*tokens, info.K);
       if (ds.tokens_per_step() != info.n())
         fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());

@@ -64,8 +64,9 @@ void apply_sampling_sets(const SharedFlags& f, const std::string& section, const
     if (std::find(sampling_keys.begin(), sampling_keys.end(), key) != sampling_keys.end())
       model_cfg.set(kv);
     else if (key.rfind(section + ".", 0) == 0)
-      fail("--set {}: {} comes from the weights file {}; here only {} can be set", kv, key, weights,
-           fmt::join(sampling_keys, ", "));
+      fail("--set {}: {} comes from the weights file {}; {}", kv, key, weights,
+           sampling_keys.empty() ? std::string("none of its keys can be set here")
+                                 : fmt::format("here only {} can be set", fmt::join(sampling_keys, ", ")));
   }
   model_cfg.validate();
 }
