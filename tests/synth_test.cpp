@@ -258,6 +258,71 @@ TEST(Synth, WanderMakesSteeringDepartFromTheRoad) {
   }
 }
 
+// A swerving driver (WorldSpec::swerve) steers open loop at random moments: strong turns both ways, never beyond
+// its limit while swerving, off its lane and back again. The episode records it, and replay rebuilds it.
+TEST(Synth, SwervesSteerStronglyBothWaysAndReturnToTheLane) {
+  const double limit = 0.035;
+  int strong_left = 0, strong_right = 0, frames = 0, back_in_lane = 0;
+  double max_offset = 0;
+  for (int idx = 0; idx < 3; ++idx) {
+    auto o = small(71, 20.0);
+    o.swerve = limit;
+    gs::Simulator sim(o, idx);
+    bool was_off = false;
+    for (int i = 0; i < 500; ++i, ++frames) {
+      const gs::ActionStep a = sim.policy();
+      const gs::Ego& e = sim.world().ego();
+      const bool swerving = sim.world().time() >= e.swerve_start && sim.world().time() < e.swerve_end;
+      if (swerving) EXPECT_LE(std::abs(a.curvature), limit + 1e-6) << "frame " << i;
+      strong_left += a.curvature > 0.02;
+      strong_right += a.curvature < -0.02;
+      const double off = std::abs(e.d - e.d_ref);
+      max_offset = std::max(max_offset, off);
+      if (off > 1.0) was_off = true;
+      if (was_off && off < 0.3) back_in_lane++, was_off = false;
+      sim.step(a);
+    }
+  }
+  std::cout << "strong left " << strong_left << ", strong right " << strong_right << " of " << frames
+            << " frames; max |d - d_ref| " << max_offset << " m; returned to the lane " << back_in_lane << " times\n";
+  EXPECT_GT(strong_left, frames / 50);
+  EXPECT_GT(strong_right, frames / 50);
+  EXPECT_GT(max_offset, 1.0);
+  EXPECT_GE(back_in_lane, 2);
+  // The lane keeper rarely turns that hard on the same roads.
+  int keeper_strong = 0;
+  for (int idx = 0; idx < 3; ++idx) {
+    gs::Simulator lane_keeper(small(71, 20.0), idx);
+    for (int i = 0; i < 500; ++i) {
+      const gs::ActionStep a = lane_keeper.policy();
+      keeper_strong += std::abs(a.curvature) > 0.02;
+      lane_keeper.step(a);
+    }
+  }
+  EXPECT_LT(5 * keeper_strong, strong_left + strong_right) << keeper_strong;
+
+  TempDir tmp;
+  auto o = small(71, 2.0);
+  o.swerve = limit;
+  auto m = gs::write_episode(tmp.path / "orig", o, 1);
+  EXPECT_EQ(m.extra.at("synth_swerve"), "0.035");
+  gaia::data::Episode orig(tmp.path / "orig" / "episodes" / m.id);
+  std::vector<gs::ActionStep> rec;
+  for (int64_t i = 10; i < orig.size(); ++i) rec.push_back({orig.speed(i), orig.curvature(i)});
+  gs::replay(orig, 10, rec, tmp.path / "replay", "same");
+  gaia::data::Episode same_ep(tmp.path / "replay" / "episodes" / "same");
+  for (int64_t i = 0; i < same_ep.size(); ++i)
+    EXPECT_TRUE(same(orig.frame_bgr(10 + i), same_ep.frame_bgr(i)) || psnr(orig.frame_bgr(10 + i), same_ep.frame_bgr(i)) > 40)
+        << "frame " << i;
+  o.swerve = 0.5;
+  try {
+    gs::Simulator bad(o, 0);
+    ADD_FAILURE() << "swerve 0.5 accepted";
+  } catch (const gaia::Error& err) {
+    EXPECT_NE(std::string(err.what()).find("swerve"), std::string::npos) << err.what();
+  }
+}
+
 TEST(Synth, CaptionsAgreeWithLabels) {
   const char* weathers[] = {"clear", "overcast", "rain", "fog", "snow"};
   const char* tods[] = {"day", "dusk", "night"};

@@ -39,6 +39,9 @@ void register_synth(CLI::App& app) {
   cmd->add_option("--wander", o->wander,
                   "the driver's lateral wander in its lane, m (0 = lane keeping; steering then carries information "
                   "the road does not, see docs/synth.md)");
+  cmd->add_option("--swerve", o->swerve,
+                  "the largest curvature of the driver's open-loop swerves, 1/m (0 = none; every 1.5-5 s it steers "
+                  "off its lane for 0.4-1.6 s, then returns; see docs/synth.md)");
   cmd->add_option("--codec", o->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
   cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
   add_shared_flags(cmd, flags.get(), "dataset directory");

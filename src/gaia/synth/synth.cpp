@@ -29,6 +29,7 @@ WorldSpec spec_from(const SynthOptions& o, int index) {
   s.fps = o.fps;
   s.seconds = o.seconds;
   s.wander = o.wander;
+  s.swerve = o.swerve;
   return resolve_spec(s);
 }
 
@@ -77,6 +78,7 @@ data::EpisodeMeta Simulator::meta() const {
   m.extra["synth_seconds"] = fmt::format("{}", s.seconds);
   m.extra["synth_scene"] = s.scene;
   if (s.wander > 0) m.extra["synth_wander"] = fmt::format("{}", s.wander);
+  if (s.swerve > 0) m.extra["synth_swerve"] = fmt::format("{}", s.swerve);
   m.extra["synth_district"] = s.district;
   m.extra["district"] = s.district;
   m.extra["lanes"] = std::to_string(world_->layout().lanes_fwd);
@@ -137,6 +139,8 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
   o.district = need(m, "synth_district", where);
   if (auto w = m.extra.find("synth_wander"); w != m.extra.end())
     o.wander = parse_double(w->second, where.string() + ": synth_wander");
+  if (auto w = m.extra.find("synth_swerve"); w != m.extra.end())
+    o.swerve = parse_double(w->second, where.string() + ": synth_swerve");
   o.overwrite = overwrite;
   if (from < 0 || from > original.size())
     fail("{}: replay start frame {} is outside [0, {}]", where.string(), from, original.size());

@@ -27,6 +27,7 @@ struct SynthOptions {
   std::string district;              // "" = random; see district.h
   std::string frame_codec = "raw";
   double wander = 0;                 // the driver's lateral wander in its lane, m (WorldSpec::wander)
+  double swerve = 0;                 // the largest curvature of the driver's open-loop swerves, 1/m (WorldSpec::swerve)
   bool overwrite = false;            // replace an existing episode with the same id
 };
 

@@ -52,6 +52,7 @@ WorldSpec resolve_spec(WorldSpec spec) {
   if (!(spec.seconds > 0 && spec.seconds <= 3600)) fail("synth: seconds must be in (0, 3600], got {}", spec.seconds);
   if (spec.index < 0) fail("synth: episode index must be >= 0, got {}", spec.index);
   if (!(spec.wander >= 0 && spec.wander <= 3)) fail("synth: wander must be in [0, 3] m, got {}", spec.wander);
+  if (!(spec.swerve >= 0 && spec.swerve <= 0.1)) fail("synth: swerve must be in [0, 0.1] 1/m, got {}", spec.swerve);
   Rng r(stream_key(spec.seed, static_cast<uint64_t>(spec.index), "spec"));
   const double u_district = r.uniform(), u_scene = r.uniform(), u_w = r.uniform(), u_t = r.uniform();
   if (spec.district.empty()) {
@@ -450,7 +451,24 @@ ActionStep World::policy() {
   const double dx = tx - ego_.x, dy = ty - ego_.y;
   const double fwd = dx * std::cos(ego_.h) + dy * std::sin(ego_.h);
   const double lat = -dx * std::sin(ego_.h) + dy * std::cos(ego_.h);
-  const double k = std::clamp(2 * lat / std::max(1.0, fwd * fwd + lat * lat), -0.2, 0.2);
+  double k = std::clamp(2 * lat / std::max(1.0, fwd * fwd + lat * lat), -0.2, 0.2);
+  if (spec_.swerve > 0) {
+    // Open-loop swerves at random moments (WorldSpec::swerve): the first after 0.5-3 s, then 1.5-5 s apart.
+    while (t >= ego_.next_swerve_t) {
+      Rng r(stream_key(seed, idx, "swerve", ego_.swerve_counter++));
+      if (ego_.next_swerve_t < 0) {
+        ego_.next_swerve_t = r.uniform(0.5, 3);
+        continue;
+      }
+      ego_.swerve_start = ego_.next_swerve_t;
+      ego_.swerve_end = ego_.swerve_start + r.uniform(0.4, 1.6);
+      ego_.swerve_k = r.uniform(-spec_.swerve, spec_.swerve);
+      ego_.swerve_rate = r.chance(0.5) ? 0.0 : r.uniform(-spec_.swerve, spec_.swerve);
+      ego_.next_swerve_t = ego_.swerve_end + r.uniform(1.5, 5);
+    }
+    if (t < ego_.swerve_end)
+      k = std::clamp(ego_.swerve_k + ego_.swerve_rate * (t - ego_.swerve_start), -spec_.swerve, spec_.swerve);
+  }
 
   // Longitudinal: cruise speed, bends, bumps, lead vehicle, red lights, pedestrians.
   // Speed limits ahead (bends, bumps) become a comfortable deceleration profile: v^2 = v_lim^2 + 2 b x.

@@ -36,6 +36,11 @@ struct WorldSpec {
   // ignore its action inputs; a driver that drifts to a new offset at random moments makes steering carry
   // information the frames do not (docs/synth.md, "Wander").
   double wander = 0;
+  // Swerves: every 1.5-5 s the driver lets go of the lane and steers open loop for 0.4-1.6 s, a curvature drawn
+  // in [-swerve, swerve] 1/m plus a drift of up to swerve 1/m per second, then pure pursuit brings it back
+  // (0 = never). Recorded drives then contain what the action evaluation commands (strong turns, a pull off the
+  // lane), so a world model can learn what such actions look like instead of only what a lane keeper does.
+  double swerve = 0;
 };
 
 // Fills empty district / weather / time_of_day / scene deterministically from (seed, index) and checks the
@@ -97,6 +102,8 @@ struct Ego {
   uint64_t vdes_counter = 0, lc_counter = 0;
   double wander = 0, wander_goal = 0, next_wander_t = 0;  // current / goal offset from d_ref (m), next decision
   uint64_t wander_counter = 0;
+  double swerve_k = 0, swerve_rate = 0, swerve_start = 0, swerve_end = -1, next_swerve_t = -1;
+  uint64_t swerve_counter = 0;
 };
 
 class World {
