@@ -36,6 +36,8 @@ void register_train_all(CLI::App& app) {
   auto seconds = std::make_shared<double>(30);
   auto wander_episodes = std::make_shared<int>(80);
   auto wander = std::make_shared<double>(1.2);
+  auto swerve_episodes = std::make_shared<int>(80);
+  auto swerve = std::make_shared<double>(0.035);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
   // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
@@ -50,6 +52,10 @@ void register_train_all(CLI::App& app) {
                   "further episodes whose driver wanders in its lane (recipe: 80; docs/synth.md: without them the "
                   "recorded steering is the road's and nothing learns to read it from the actions or the frames)");
   cmd->add_option("--wander", *wander, "their lateral wander, m (recipe: 1.2)");
+  cmd->add_option("--swerve-episodes", *swerve_episodes,
+                  "further wandering episodes whose driver also swerves off its lane and back (recipe: 80; they show "
+                  "the world model the strong turns and drifts that gaia eval commands)");
+  cmd->add_option("--swerve", *swerve, "their largest swerve curvature, 1/m (recipe: 0.035)");
   cmd->add_option("--ship", *ship, "also write fp16 copies of the final weights into this directory (e.g. models)");
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
@@ -108,6 +114,14 @@ void register_train_all(CLI::App& app) {
                            "--seconds", fmt::format("{}", *seconds), "--seed", "1", "--wander", fmt::format("{}", *wander),
                            "--out", synth}),
                      out / "synth" / ".complete-wander"});
+    if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
+    if (*swerve_episodes > 0)  // after the wandering ones, into the same dataset
+      stages.insert(stages.begin() + (*wander_episodes > 0 ? 2 : 1),
+                    {"data-swerve",
+                     with({"synth", "--episodes", std::to_string(*swerve_episodes), "--first",
+                           std::to_string(*episodes + *wander_episodes), "--seconds", fmt::format("{}", *seconds), "--seed",
+                           "1", "--wander", fmt::format("{}", *wander), "--swerve", fmt::format("{}", *swerve), "--out", synth}),
+                     out / "synth" / ".complete-swerve"});
     if (!*skip_eval) {
       stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
                         out / "world-eval" / "eval.json"});
