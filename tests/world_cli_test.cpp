@@ -197,7 +197,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
                            q(models / "probe-dynamics.safetensors") + " --scene-probe " +
                            q(models / "probe-scene.safetensors") + p.tiny();
   auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames 2 --futures 2" +
-                          " --text-frames 1 --scales 0 2 --long-seconds 2 --window-seconds 1 --action-guidance 1.5 --out " +
+                          " --text-frames 1 --scales 0,2 --long-seconds 2 --window-seconds 1 --action-guidance 1.5 --out " +
                           q(p.dir / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));

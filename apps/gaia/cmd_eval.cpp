@@ -47,7 +47,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)");
   cmd->add_option("--action-guidance", e->action_guidance,
                   "classifier-free guidance scale on the commanded actions (action control; 0 = off)");
-  cmd->add_option("--scales", e->scales, "guidance scales for text control");
+  cmd->add_option("--scales", e->scales, "guidance scales for text control, e.g. 0,1,2,4")->delimiter(',');
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
   cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")
