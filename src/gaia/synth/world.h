@@ -37,9 +37,9 @@ struct WorldSpec {
   // information the frames do not (docs/synth.md, "Wander").
   double wander = 0;
   // Swerves: every 1.5-5 s the driver lets go of the lane and steers open loop for 0.4-1.6 s, a curvature drawn
-  // in [-swerve, swerve] 1/m plus a drift of up to swerve 1/m per second, then pure pursuit brings it back
-  // (0 = never). Recorded drives then contain what the action evaluation commands (strong turns, a pull off the
-  // lane), so a world model can learn what such actions look like instead of only what a lane keeper does.
+  // in [-swerve, swerve] 1/m plus, half the time, a drift of up to swerve 1/m per second; then pure pursuit
+  // brings it back (0 = never). Recorded drives then contain what the action evaluation commands (strong turns, a
+  // pull off the lane), so a world model can learn what such actions look like, not only what a lane keeper does.
   double swerve = 0;
 };
 
