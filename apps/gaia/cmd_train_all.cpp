@@ -106,22 +106,23 @@ void register_train_all(CLI::App& app) {
          with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
          out / "probe-dynamics" / "probe-dynamics.safetensors"},
     };
+    // Further drives into the same dataset, right after the lane-keeping ones (docs/synth.md): wandering, then
+    // wandering and swerving. Each is its own resumable stage with its own episode indices.
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
-    if (*wander_episodes > 0)  // right after the lane-keeping data, into the same dataset
-      stages.insert(stages.begin() + 1,
-                    {"data-wander",
-                     with({"synth", "--episodes", std::to_string(*wander_episodes), "--first", std::to_string(*episodes),
-                           "--seconds", fmt::format("{}", *seconds), "--seed", "1", "--wander", fmt::format("{}", *wander),
-                           "--out", synth}),
-                     out / "synth" / ".complete-wander"});
     if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
-    if (*swerve_episodes > 0)  // after the wandering ones, into the same dataset
-      stages.insert(stages.begin() + (*wander_episodes > 0 ? 2 : 1),
-                    {"data-swerve",
-                     with({"synth", "--episodes", std::to_string(*swerve_episodes), "--first",
-                           std::to_string(*episodes + *wander_episodes), "--seconds", fmt::format("{}", *seconds), "--seed",
-                           "1", "--wander", fmt::format("{}", *wander), "--swerve", fmt::format("{}", *swerve), "--out", synth}),
-                     out / "synth" / ".complete-swerve"});
+    std::vector<Stage> more_drives;
+    auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
+      if (n == 0) return;
+      std::vector<std::string> a{"synth", "--episodes", std::to_string(n), "--first", std::to_string(first),
+                                 "--seconds", fmt::format("{}", *seconds), "--seed", "1"};
+      a.insert(a.end(), driver.begin(), driver.end());
+      a.insert(a.end(), {"--out", synth});
+      more_drives.push_back({"data-" + kind, with(a), out / "synth" / (".complete-" + kind)});
+    };
+    drives("wander", *wander_episodes, *episodes, {"--wander", fmt::format("{}", *wander)});
+    drives("swerve", *swerve_episodes, *episodes + *wander_episodes,
+           {"--wander", fmt::format("{}", *wander), "--swerve", fmt::format("{}", *swerve)});
+    stages.insert(stages.begin() + 1, more_drives.begin(), more_drives.end());
     if (!*skip_eval) {
       stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
                         out / "world-eval" / "eval.json"});
