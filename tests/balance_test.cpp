@@ -1,11 +1,12 @@
 // Balanced sampling (paper §3): exponents 0, 0.5 and 1 give the empirical, square-root and uniform
-// distributions, checked statistically by actually sampling; and the geofenced split.
+// distributions, checked statistically by actually sampling; the geofenced split; mirror images and their split.
 #include <cmath>
 #include <random>
 
 #include "gaia/core/error.h"
 #include "gaia/data/balance.h"
 #include "gaia/data/geofence.h"
+#include "gaia/data/mirror.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -132,4 +133,38 @@ TEST(Geofence, StrictBoxesAreValidationOnly) {
   EXPECT_GT(r1.val_random.size(), 0u);
   EXPECT_THROW(parse_geobox("1,2,3"), Error);
   EXPECT_THROW(parse_geobox("5,2,3,4"), Error);
+}
+
+TEST(Mirror, SwapsSidesInWordsAndLabelsButNotIntensifiers) {
+  EXPECT_EQ(mirror_words("approaching a left bend, changing lanes to the Right"),
+            "approaching a right bend, changing lanes to the Left");
+  EXPECT_EQ(mirror_words("right behind a bus, right ahead: LEFT"), "right behind a bus, right ahead: RIGHT");
+  EXPECT_EQ(mirror_words("left_bend"), "right_bend");
+  EXPECT_EQ(mirror_words("leftover rights, bright"), "leftover rights, bright");  // whole words only
+  nlohmann::json l = {{"curvature", 0.01}, {"lane_offset_m", -0.5}, {"road_ahead", "right_bend"}, {"ego_lane", 1},
+                      {"speed", 7.0}, {"weather", "rain"}};
+  nlohmann::json m = mirror_labels(l);
+  EXPECT_DOUBLE_EQ(m["curvature"].get<double>(), -0.01);
+  EXPECT_DOUBLE_EQ(m["lane_offset_m"].get<double>(), 0.5);
+  EXPECT_EQ(m["road_ahead"], "left_bend");
+  EXPECT_EQ(m["ego_lane"], 1);
+  EXPECT_DOUBLE_EQ(m["speed"].get<double>(), 7.0);
+  EXPECT_EQ(m["weather"], "rain");
+  EXPECT_EQ(mirror_labels(m), l);  // an involution
+}
+
+TEST(Mirror, MirrorImagesAreHeldOutWithTheirSource) {
+  EXPECT_EQ(mirrored_id("e7"), "e7-mirror");
+  EXPECT_EQ(mirror_source_id("e7-mirror"), "e7");
+  EXPECT_EQ(mirror_source_id("e7"), "e7");
+  EXPECT_EQ(mirror_source_id("-mirror"), "-mirror");
+  int held = 0;
+  for (int i = 0; i < 200; ++i) {
+    const std::string id = "synth-e" + std::to_string(i);
+    const bool v = held_out_at_random(id, 0.2, 3);
+    held += v;
+    EXPECT_EQ(held_out_at_random(mirrored_id(id), 0.2, 3), v) << id;
+  }
+  EXPECT_GT(held, 20);  // the hold-out is real, so agreement above is not trivial
+  EXPECT_LT(held, 60);
 }

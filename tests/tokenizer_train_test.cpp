@@ -1,4 +1,6 @@
-// Tokenizer training end to end on tiny synthetic data: overfitting, exact resume, tokenize, and CLI errors.
+// Tokenizer training end to end on tiny synthetic data: overfitting, exact resume, tokenize (plain and mirrored),
+// and CLI errors.
+#include <opencv2/core.hpp>
 #include <torch/torch.h>
 
 #include "gaia/core/config.h"
@@ -6,6 +8,7 @@
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/data/geofence.h"
+#include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/synth/synth.h"
 #include "gaia/tokenizer/io.h"
@@ -32,6 +35,15 @@ void make_dataset(const fs::path& dir, int episodes, double seconds) {
   o.seconds = seconds;
   o.seed = 5;
   for (int e = 0; e < episodes; ++e) synth::write_episode(dir, o, e);
+}
+
+// A barely trained tiny tokenizer at RUN/tokenizer.safetensors: enough to test what consumes one.
+void train_two_steps(const fs::path& dataset, const fs::path& run) {
+  tokenizer::TrainOptions o;
+  o.dataset = dataset;
+  o.out = run;
+  o.steps = 2;
+  tokenizer::train_tokenizer(tiny(), o);
 }
 
 }  // namespace
@@ -147,12 +159,7 @@ TEST(TokenizerTrain, InitFineTunesFromWeightsAndBalancesTheGanGradient) {
 TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 2.0);  // 50 frames at 25 Hz -> 13 steps at 6.25 Hz
-  Config c = tiny();
-  tokenizer::TrainOptions o;
-  o.dataset = dir / "ds";
-  o.out = dir / "run";
-  o.steps = 2;
-  tokenizer::train_tokenizer(c, o);
+  train_two_steps(dir / "ds", dir / "run");
   auto r = tokenizer::tokenize_dataset(dir / "ds", dir / "run" / "tokenizer.safetensors", dir / "tok", 6.25, torch::kCPU);
   EXPECT_EQ(r.episodes_written, 2);
   data::Dataset ds(dir / "ds");
@@ -192,4 +199,45 @@ TEST(TokenizerTrain, BadInputsAreClearErrors) {
   auto n = test::run_gaia("tokenize '" + (dir / "ds").string() + "' --tokenizer '" + (dir / "notok.safetensors").string() + "' --out '" + (dir / "t").string() + "'");
   EXPECT_NE(n.status, 0);
   EXPECT_NE(n.output.find("not a gaia tokenizer"), std::string::npos) << n.output;
+}
+
+TEST(TokenizerTrain, TokenizeMirrorAddsMirrorImagesThatSteerTheOtherWay) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 1.0);
+  train_two_steps(dir / "ds", dir / "run");
+  const fs::path w = dir / "run" / "tokenizer.safetensors";
+  auto r = tokenizer::tokenize_dataset(dir / "ds", w, dir / "tok", 6.25, torch::kCPU, {}, /*mirror=*/true);
+  EXPECT_EQ(r.episodes_written, 4);
+  data::Dataset ds(dir / "ds");
+  data::Episode ep = ds.episode(0);
+  const fs::path plain = dir / "tok" / "episodes" / ds.ids()[0], mirror = dir / "tok" / "episodes" / (ds.ids()[0] + "-mirror");
+  ASSERT_TRUE(fs::exists(mirror / "episode.json"));
+  // Curvature changes sign, speed stays.
+  NpyArray pa = npy_read(plain / "actions.npy"), ma = npy_read(mirror / "actions.npy");
+  ASSERT_EQ(pa.shape, ma.shape);
+  const float *a = pa.as<float>(), *m = ma.as<float>();
+  for (int64_t i = 0; i < pa.shape[0] * 2; i += 2) {
+    EXPECT_EQ(m[i], a[i]);
+    EXPECT_EQ(m[i + 1], -a[i + 1]);
+  }
+  // Tokens are the encoding of the flipped frame.
+  auto t = tokenizer::load_tokenizer(w, torch::kCPU);
+  cv::Mat flipped;
+  cv::flip(ep.frame_bgr(4), flipped, 1);
+  auto direct = tokenizer::encode_frames(t, {flipped}, torch::kCPU).reshape({-1});
+  auto mt = npy_read(mirror / "tokens.npy").to_int64();
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(mt[static_cast<size_t>(32 + i)], direct[i].item<int64_t>());
+  // Captions and labels are the mirror's; the metadata names the source.
+  auto meta = nlohmann::json::parse(read_file(mirror / "episode.json"));
+  EXPECT_EQ(meta["id"], ds.ids()[0] + "-mirror");
+  EXPECT_EQ(meta["mirror_of"], ds.ids()[0]);
+  auto lab = nlohmann::json::parse(read_file(mirror / "labels.jsonl").substr(0, read_file(mirror / "labels.jsonl").find('\n')));
+  EXPECT_DOUBLE_EQ(lab["curvature"].get<double>(), -ep.labels(0)["curvature"].get<double>());
+  auto cap = read_file(mirror / "captions.jsonl");
+  EXPECT_EQ(cap.substr(0, cap.find('\n')), nlohmann::json(data::mirror_words(ep.caption(0))).dump());
+  // Resume skips both; a plain run into the mirrored directory is refused.
+  auto again = tokenizer::tokenize_dataset(dir / "ds", w, dir / "tok", 6.25, torch::kCPU, {}, true);
+  EXPECT_EQ(again.episodes_skipped, 4);
+  EXPECT_EQ(again.episodes_written, 0);
+  EXPECT_THROW(tokenizer::tokenize_dataset(dir / "ds", w, dir / "tok", 6.25, torch::kCPU), Error);
 }

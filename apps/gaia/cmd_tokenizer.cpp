@@ -199,6 +199,10 @@ void register_tokenizer(CLI::App& app) {
     auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     cmd->add_option("DATASET", *src, "episode dataset")->required();
     cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    auto mirror = std::make_shared<bool>(false);
+    cmd->add_flag("--mirror", *mirror,
+                  "also write each episode in mirror image as <id>-mirror (flipped frames, negated curvature, left/right "
+                  "swapped in captions): balances left and right steering");
     add_shared_flags(cmd, flags.get(), "token dataset directory");
     cmd->callback([=] {
       Config run = resolve_config(*flags);
@@ -210,7 +214,8 @@ void register_tokenizer(CLI::App& app) {
                                            [&](int64_t done, int64_t total) {
                                              if (!bar) bar = std::make_unique<ProgressBar>(total, "tokenize");
                                              bar->update(done);
-                                           });
+                                           },
+                                           *mirror);
       if (bar) bar->finish();
       std::printf("tokenized %lld episodes (%lld skipped as already done), %lld steps at %.4g Hz -> %s\n",
                   (long long)r.episodes_written, (long long)r.episodes_skipped, (long long)r.steps, run.data.world_fps,

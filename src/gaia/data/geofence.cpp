@@ -4,6 +4,7 @@
 #include <random>
 
 #include "gaia/core/error.h"
+#include "gaia/data/mirror.h"
 #include "gaia/data/signals.h"
 
 namespace gaia::data {
@@ -62,7 +63,7 @@ Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, doubl
 
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {
   uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
-  for (unsigned char c : id) h = (h ^ c) * 1099511628211ull;
+  for (unsigned char c : mirror_source_id(id)) h = (h ^ c) * 1099511628211ull;  // a mirror image goes with its source
   std::mt19937_64 rng(seed ^ h);
   return std::uniform_real_distribution<double>(0, 1)(rng) < frac;
 }

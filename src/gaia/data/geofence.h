@@ -30,6 +30,7 @@ struct Split {
 Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
 
 // The random hold-out decision for one episode: a hash of (seed, id), so it does not change when episodes are added.
+// A mirrored episode (data/mirror.h) hashes its source's id: it is held out exactly when its source is.
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed);
 
 Split read_split(const fs::path& file);  // a split.json; errors name the file

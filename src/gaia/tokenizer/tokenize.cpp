@@ -10,6 +10,7 @@
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/episode.h"
 #include "gaia/data/geofence.h"
+#include "gaia/data/mirror.h"
 #include "gaia/tokenizer/io.h"
 
 namespace gaia::tokenizer {
@@ -27,33 +28,45 @@ float nan_mean(const std::vector<float>& v, int64_t a, int64_t b) {
 }  // namespace
 
 TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights, const fs::path& out, double rate,
-                                const torch::Device& device, const std::function<void(int64_t, int64_t)>& progress) {
+                                const torch::Device& device, const std::function<void(int64_t, int64_t)>& progress,
+                                bool mirror) {
   data::Dataset ds(dataset);
   Config c;
   auto t = load_tokenizer(weights, device, &c);
   json header = {{"format", "gaia-tokens"}, {"schema_version", 1}, {"rate_hz", rate},
                  {"grid", {c.tokens_h(), c.tokens_w()}}, {"codebook_size", c.tokenizer.codebook_size},
-                 {"tokenizer", weights.filename().string()}, {"source", dataset.string()}};
+                 {"tokenizer", weights.filename().string()}, {"source", dataset.string()}, {"mirror", mirror}};
   fs::path hf = out / "dataset.json";
   if (fs::exists(hf)) {
     json old = json::parse(read_file(hf));
     if (old.value("grid", json()) != header["grid"] || old.value("codebook_size", 0) != c.tokenizer.codebook_size ||
-        old.value("rate_hz", 0.0) != rate)
-      fail("{}: exists with a different tokenizer grid, codebook or rate; use a new --out", hf.string());
+        old.value("rate_hz", 0.0) != rate || old.value("mirror", false) != mirror)
+      fail("{}: exists with a different tokenizer grid, codebook, rate or --mirror; use a new --out", hf.string());
   } else {
     fs::create_directories(out / "episodes");
     write_file_atomic(hf, header.dump(2) + "\n");
   }
   // The source's split (geofenced validation, §3) travels with its tokens, so the world model is validated on the
   // same held-out roads as the tokenizer. Checked, and copied on every run: a resumed run follows a re-split source.
-  if (fs::exists(dataset / "split.json"))
-    write_file_atomic(out / "split.json", data::read_split(dataset / "split.json").to_json().dump(2) + "\n");
+  // Mirror images join their source's list (data/mirror.h).
+  if (fs::exists(dataset / "split.json")) {
+    data::Split sp = data::read_split(dataset / "split.json");
+    if (mirror)
+      for (auto* ids : {&sp.train, &sp.val_geofence, &sp.val_random})
+        for (size_t i = 0, n = ids->size(); i < n; ++i) ids->push_back(data::mirrored_id((*ids)[i]));
+    write_file_atomic(out / "split.json", sp.to_json().dump(2) + "\n");
+  }
   TokenizeResult r;
   for (size_t e = 0; e < ds.size(); ++e) {
     const std::string id = ds.ids()[e];
-    fs::path dst = out / "episodes" / id;
-    if (fs::exists(dst / "episode.json")) {
-      ++r.episodes_skipped;
+    std::vector<std::pair<std::string, bool>> todo;  // (output id, mirrored)
+    for (bool m : {false, true}) {
+      if (m && !mirror) continue;
+      const std::string oid = m ? data::mirrored_id(id) : id;
+      if (fs::exists(out / "episodes" / oid / "episode.json")) ++r.episodes_skipped;
+      else todo.emplace_back(oid, m);
+    }
+    if (todo.empty()) {
       if (progress) progress(static_cast<int64_t>(e + 1), static_cast<int64_t>(ds.size()));
       continue;
     }
@@ -69,37 +82,48 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
         fail("{}: frames are {}x{}, the tokenizer wants {}x{}", ep.dir().string(), f.rows, f.cols, c.data.height, c.data.width);
       frames.push_back(f);
     }
-    torch::Tensor tokens = encode_frames(t, frames, device).to(torch::kInt16).contiguous();
-    std::vector<float> actions;
-    std::vector<double> ts;
-    std::string caps, labels;
-    for (size_t k = 0; k < idx.size(); ++k) {
-      int64_t a = idx[k], b = k + 1 < idx.size() ? idx[k + 1] : idx[k] + 1;  // the step's source frames [a, b)
-      actions.push_back(nan_mean(ep.speeds(), a, b));
-      actions.push_back(nan_mean(ep.curvatures(), a, b));
-      ts.push_back(times[static_cast<size_t>(a)]);
-      caps += json(ep.caption(a)).dump() + "\n";
-      if (ep.has_labels()) labels += ep.labels(a).dump() + "\n";
+    for (const auto& [oid, mirrored] : todo) {
+      std::vector<cv::Mat> shown = frames;
+      if (mirrored)
+        for (auto& f : shown) cv::flip(f, f, 1);  // new Mats: flip writes a fresh buffer into each copy's header
+      torch::Tensor tokens = encode_frames(t, shown, device).to(torch::kInt16).contiguous();
+      const float side = mirrored ? -1.f : 1.f;  // curvature changes sign in the mirror
+      std::vector<float> actions;
+      std::vector<double> ts;
+      std::string caps, labels;
+      for (size_t k = 0; k < idx.size(); ++k) {
+        int64_t a = idx[k], b = k + 1 < idx.size() ? idx[k + 1] : idx[k] + 1;  // the step's source frames [a, b)
+        actions.push_back(nan_mean(ep.speeds(), a, b));
+        actions.push_back(side * nan_mean(ep.curvatures(), a, b));
+        ts.push_back(times[static_cast<size_t>(a)]);
+        const std::string cap = ep.caption(a);
+        caps += json(mirrored ? data::mirror_words(cap) : cap).dump() + "\n";
+        if (ep.has_labels()) labels += (mirrored ? data::mirror_labels(ep.labels(a)) : ep.labels(a)).dump() + "\n";
+      }
+      StagingDir stage(out / "episodes" / oid);
+      NpyArray tok;
+      tok.dtype = DType::I16;
+      tok.shape = tokens.sizes().vec();
+      tok.bytes.resize(static_cast<size_t>(tokens.numel()) * 2);
+      std::memcpy(tok.bytes.data(), tokens.data_ptr(), tok.bytes.size());
+      npy_write(stage.path() / "tokens.npy", tok);
+      const int64_t n = static_cast<int64_t>(idx.size());
+      npy_write(stage.path() / "actions.npy", npy_make(DType::F32, {n, 2}, actions));
+      npy_write(stage.path() / "time_s.npy", npy_make(DType::F64, {n}, ts));
+      write_file_atomic(stage.path() / "captions.jsonl", caps);
+      if (!labels.empty()) write_file_atomic(stage.path() / "labels.jsonl", labels);
+      json meta = ep.meta().to_json();
+      if (mirrored) {
+        meta["id"] = oid;
+        meta["mirror_of"] = id;
+      }
+      meta["frames"] = idx;
+      meta["steps"] = n;
+      write_file_atomic(stage.path() / "episode.json", meta.dump(2) + "\n");
+      stage.commit(true);
+      ++r.episodes_written;
+      r.steps += n;
     }
-    StagingDir stage(dst);
-    NpyArray tok;
-    tok.dtype = DType::I16;
-    tok.shape = tokens.sizes().vec();
-    tok.bytes.resize(static_cast<size_t>(tokens.numel()) * 2);
-    std::memcpy(tok.bytes.data(), tokens.data_ptr(), tok.bytes.size());
-    npy_write(stage.path() / "tokens.npy", tok);
-    const int64_t n = static_cast<int64_t>(idx.size());
-    npy_write(stage.path() / "actions.npy", npy_make(DType::F32, {n, 2}, actions));
-    npy_write(stage.path() / "time_s.npy", npy_make(DType::F64, {n}, ts));
-    write_file_atomic(stage.path() / "captions.jsonl", caps);
-    if (!labels.empty()) write_file_atomic(stage.path() / "labels.jsonl", labels);
-    json meta = ep.meta().to_json();
-    meta["frames"] = idx;
-    meta["steps"] = n;
-    write_file_atomic(stage.path() / "episode.json", meta.dump(2) + "\n");
-    stage.commit(true);
-    ++r.episodes_written;
-    r.steps += n;
     if (progress) progress(static_cast<int64_t>(e + 1), static_cast<int64_t>(ds.size()));
   }
   return r;

@@ -9,6 +9,8 @@
 //   TOKENS/episodes/<id>/episode.json   the source episode's metadata + "frames": the source frame indices
 //   TOKENS/split.json                   a copy of DATASET/split.json when there is one (geofenced validation)
 // Episodes are staged and renamed, so an interrupted run resumes by skipping finished episodes.
+// With `mirror`, each episode is also written in mirror image as `<id>-mirror` (data/mirror.h: flipped frames,
+// negated curvature, left/right swapped in captions and labels), which balances left and right steering.
 #include <functional>
 
 #include <opencv2/core.hpp>
@@ -23,7 +25,8 @@ struct TokenizeResult {
 };
 
 TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights, const fs::path& out, double rate_hz,
-                                const torch::Device& device, const std::function<void(int64_t, int64_t)>& progress = {});
+                                const torch::Device& device, const std::function<void(int64_t, int64_t)>& progress = {},
+                                bool mirror = false);
 
 // Fig. 3 of the paper: frames next to the top-3 PCA components of their code vectors as RGB (nearest-upsampled).
 cv::Mat pca_sheet(ImageTokenizer& t, const std::vector<cv::Mat>& frames, const torch::Device& device);
