@@ -1,8 +1,9 @@
 #pragma once
 // Mirror-image augmentation: a drive seen in a horizontal mirror is another plausible drive in which every turn goes
 // the other way. Frames flip left-right, curvature changes sign, and the words "left" and "right" swap in captions
-// and labels. Steering data of a lane-keeping fleet is rarely balanced between left and right (our own synth drives
-// keep to the right-hand kerb, so hard right turns run off the road and are rare); mirroring balances it exactly.
+// and labels. Recorded steering is rarely balanced between left and right (traffic keeps to one side: our synth
+// drives keep left, as in the UK, so a turn towards the kerb and one across the road look different); the mirror
+// balances it exactly.
 // Mirrored episodes get the id `<source id>-mirror` and are held out with their source (data/geofence.h), so a
 // validation road never reaches training in mirror image.
 #include <string>
