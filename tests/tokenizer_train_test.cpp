@@ -181,6 +181,13 @@ TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   auto again = tokenizer::tokenize_dataset(dir / "ds", dir / "run" / "tokenizer.safetensors", dir / "tok", 6.25, torch::kCPU);
   EXPECT_EQ(again.episodes_skipped, 2);
   EXPECT_EQ(again.episodes_written, 0);
+  // The CLI's --mirror reaches tokenize: a plain token directory refuses to be resumed in mirror image.
+  auto m = test::run_gaia("tokenize '" + (dir / "ds").string() + "' --tokenizer '" +
+                          (dir / "run" / "tokenizer.safetensors").string() + "' --mirror --out '" + (dir / "tok").string() + "'");
+  EXPECT_NE(m.status, 0);
+  EXPECT_NE(m.output.find("dataset.json: exists with a different tokenizer grid, codebook, rate or --mirror"),
+            std::string::npos) << m.output;
+  EXPECT_FALSE(fs::exists(dir / "tok" / "episodes" / (ds.ids()[0] + "-mirror")));
 }
 
 TEST(TokenizerTrain, BadInputsAreClearErrors) {
