@@ -138,7 +138,7 @@ TEST(Geofence, StrictBoxesAreValidationOnly) {
 TEST(Mirror, SwapsSidesInWordsAndLabelsButNotIntensifiers) {
   EXPECT_EQ(mirror_words("approaching a left bend, changing lanes to the Right"),
             "approaching a right bend, changing lanes to the Left");
-  EXPECT_EQ(mirror_words("right behind a bus, right ahead: LEFT"), "right behind a bus, right ahead: RIGHT");
+  EXPECT_EQ(mirror_words("right behind a bus, turn right ahead: LEFT"), "right behind a bus, turn left ahead: RIGHT");
   EXPECT_EQ(mirror_words("left_bend"), "right_bend");
   EXPECT_EQ(mirror_words("leftover rights, bright"), "leftover rights, bright");  // whole words only
   nlohmann::json l = {{"curvature", 0.01}, {"lane_offset_m", -0.5}, {"road_ahead", "right_bend"}, {"ego_lane", 1},

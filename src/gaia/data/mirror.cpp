@@ -1,6 +1,5 @@
 #include "gaia/data/mirror.h"
 
-#include <array>
 #include <cctype>
 
 namespace gaia::data {
@@ -43,8 +42,8 @@ std::string recase(const std::string& like, std::string w) {
 }  // namespace
 
 std::string mirror_words(const std::string& text) {
-  // "right" before these words means "directly", not a side (synth captions say "right behind a bus").
-  static const std::array<const char*, 4> intensified = {"behind", "ahead", "in", "next"};
+  // "right behind" means "directly behind", not a side (synth captions say "right behind a bus"). Only that one:
+  // "right ahead" or "right in 50 m" are directions in driving text ("turn right ahead").
   std::string out;
   out.reserve(text.size() + 8);
   size_t i = 0;
@@ -56,10 +55,7 @@ std::string mirror_words(const std::string& text) {
     if (w == "left") {
       out += recase(word, "right");
     } else if (w == "right") {
-      const std::string next = next_word(text, j);
-      bool keep = false;
-      for (auto* k : intensified) keep = keep || next == k;
-      out += keep ? word : recase(word, "left");
+      out += next_word(text, j) == "behind" ? word : recase(word, "left");
     } else {
       out += word;
     }

@@ -18,7 +18,7 @@ std::string mirrored_id(const std::string& id);       // "e1" -> "e1-mirror"
 std::string mirror_source_id(const std::string& id);  // "e1-mirror" -> "e1"; any other id unchanged
 
 // Swaps the whole words "left" and "right" (any case; "_" and other non-letters separate words, so "left_bend"
-// becomes "right_bend"). "right" as an intensifier ("right behind", "right ahead", "right in front") stays.
+// becomes "right_bend"). "right behind" (directly behind) stays; "turn right ahead" becomes "turn left ahead".
 std::string mirror_words(const std::string& text);
 
 // A frame's labels in the mirror: signed lateral quantities (curvature, lane_offset_m) change sign and every string
