@@ -32,8 +32,9 @@ using Rows = std::vector<std::vector<cv::Mat>>;
 struct DemoFlags {
   std::string models = "models", video;
   int prompt_frames = 3, frames = 10, ddim_steps = 10;
-  // Text guidance: with the shipped world model s = 4 read weather / time of day at 77% / 88% (s = 2: 68% / 91%;
-  // s = 6 82% / 90% in one run, but s = 8 fell to 68%), so the demo takes the steadier middle (docs/evaluation.md).
+  // Text guidance: with the shipped world model s = 4 read weather / time of day at 77% / 88% (s = 2: 68% / 91%),
+  // and weather swings by 20 points between seeds at s = 6 (82% and 61.5%), so the demo takes the middle
+  // (docs/evaluation.md).
   double fps = 12.5, guidance = 4.0;
   // Guidance on the actions (eq. 2, null actions as unconditional): with the shipped world model s = 16 read back
   // curvature at Spearman 0.67 / 86% of the signs (s = 10: 0.60 / 80%; unguided 0.09 / 56%), with frames ~2.8 dB

@@ -83,9 +83,12 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
       frames.push_back(f);
     }
     for (const auto& [oid, mirrored] : todo) {
-      std::vector<cv::Mat> shown = frames;
+      std::vector<cv::Mat> shown = frames;  // headers only; the mirror gets fresh buffers, the source stays intact
       if (mirrored)
-        for (auto& f : shown) cv::flip(f, f, 1);  // new Mats: flip writes a fresh buffer into each copy's header
+        for (size_t i = 0; i < frames.size(); ++i) {
+          shown[i] = cv::Mat();
+          cv::flip(frames[i], shown[i], 1);
+        }
       torch::Tensor tokens = encode_frames(t, shown, device).to(torch::kInt16).contiguous();
       const float side = mirrored ? -1.f : 1.f;  // curvature changes sign in the mirror
       std::vector<float> actions;
