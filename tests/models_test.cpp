@@ -34,9 +34,9 @@ fs::path fresh_synth(const test::TempDir& d, const std::string& extra, const std
 nlohmann::json probe_scores(const std::string& weights, const fs::path& ds_dir, int stride, int examples) {
   data::Dataset ds(ds_dir);
   auto net = probe::load_probe(model(weights), torch::kCPU);
-  auto set = probe::example_set(ds, ds.ids(), stride, examples);
+  auto set = data::frame_set(ds, ds.ids(), stride, examples);
   return probe::score(net->kind, probe::predict(net, set, stride, torch::kCPU),
-                      probe::targets(net->kind, set.episodes, set.examples, stride));
+                      probe::targets(net->kind, set.episodes, set.frames, stride));
 }
 
 }  // namespace

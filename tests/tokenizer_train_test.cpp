@@ -1,5 +1,8 @@
 // Tokenizer training end to end on tiny synthetic data: overfitting, exact resume, tokenize (plain and mirrored),
 // and CLI errors.
+#include <set>
+
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <torch/torch.h>
 
@@ -7,10 +10,12 @@
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/data/frame_set.h"
 #include "gaia/data/geofence.h"
 #include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/synth/synth.h"
+#include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
 #include "gaia/tokenizer/trainer.h"
@@ -188,6 +193,73 @@ TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   EXPECT_NE(m.output.find("dataset.json: exists with a different tokenizer grid, codebook, rate or --mirror"),
             std::string::npos) << m.output;
   EXPECT_FALSE(fs::exists(dir / "tok" / "episodes" / (ds.ids()[0] + "-mirror")));
+}
+
+TEST(TokenizerEval, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 24, 0.4);  // 24 x 10 frames; the default split holds out ~10%
+  data::Dataset ds(dir / "ds");
+  const auto held = data::load_or_default_split(ds).held_out();
+  ASSERT_GE(held.size(), 2u);
+  // Spread: n frames reach every held-out episode and keep `margin` frames clear of each episode's end.
+  auto set = data::held_out_frames(ds, 0, 3, int(held.size()) * 2);
+  ASSERT_EQ(set.frames.size(), held.size() * 2);
+  std::set<size_t> seen;
+  for (const auto& f : set.frames) {
+    seen.insert(f.episode);
+    EXPECT_LT(f.frame + 3, set.episodes[f.episode]->size());
+  }
+  EXPECT_EQ(seen.size(), held.size());
+  EXPECT_EQ(data::frame_set(ds, held, 0, 0).frames.size(), held.size() * 10);  // n <= 0: every frame
+
+  // Per-group figures are the frame-weighted parts of the totals, and the totals are the plain PSNR of each frame.
+  train_two_steps(dir / "ds", dir / "run");
+  Config c;
+  auto t = tokenizer::load_tokenizer(dir / "run" / "tokenizer.safetensors", torch::kCPU, &c);
+  std::vector<cv::Mat> frames;
+  std::vector<tokenizer::FrameTags> tags;
+  std::set<std::string> weathers;
+  auto all = data::held_out_frames(ds, 0, 0, 20);
+  for (const auto& f : all.frames) {
+    frames.push_back(all.episodes[f.episode]->frame_bgr(f.frame));
+    tags.push_back({{"weather", all.episodes[f.episode]->meta().weather}, {"time_of_day", ""}});
+    weathers.insert(all.episodes[f.episode]->meta().weather);
+  }
+  int64_t calls = 0;
+  auto j = tokenizer::evaluate_reconstruction(t, c, frames, tags, torch::kCPU, [&](int64_t) { ++calls; });
+  EXPECT_EQ(calls, 2);  // batches of 16
+  EXPECT_EQ(j["frames"].get<int64_t>(), 20);
+  auto rec = tokenizer::decode_tokens(t, tokenizer::encode_frames(t, frames, torch::kCPU), torch::kCPU);
+  double direct = 0;
+  for (size_t i = 0; i < frames.size(); ++i) direct += eval::psnr(frames[i], rec[i]);
+  EXPECT_NEAR(j["psnr"].get<double>(), direct / 20, 1e-6);
+  ASSERT_TRUE(j.contains("by_weather"));
+  EXPECT_FALSE(j.contains("by_time_of_day"));  // empty values are not grouped
+  int64_t n = 0;
+  double weighted = 0;
+  std::set<std::string> keys;
+  for (auto& [w, g] : j["by_weather"].items()) {
+    keys.insert(w);
+    n += g["frames"].get<int64_t>();
+    weighted += g["frames"].get<double>() * g["psnr"].get<double>();
+  }
+  EXPECT_EQ(keys, weathers);
+  EXPECT_EQ(n, 20);
+  EXPECT_NEAR(weighted / 20, j["psnr"].get<double>(), 1e-6);
+  tags.pop_back();
+  EXPECT_THROW(tokenizer::evaluate_reconstruction(t, c, frames, tags, torch::kCPU), Error);
+
+  // The command: spread over the held-out episodes, grouped by weather and time of day, written to --out.
+  auto r = test::run_gaia("tokenizer eval '" + (dir / "ds").string() + "' --tokenizer '" +
+                          (dir / "run" / "tokenizer.safetensors").string() + "' --max-frames 12 --out '" +
+                          (dir / "eval.json").string() + "'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto e = nlohmann::json::parse(read_file(dir / "eval.json"));
+  EXPECT_EQ(e["frames"].get<int64_t>(), 12);
+  int64_t by_time = 0;
+  for (auto& [k, g] : e["by_time_of_day"].items()) by_time += g["frames"].get<int64_t>();
+  EXPECT_EQ(by_time, 12);
+  EXPECT_EQ(e["by_weather"].size(), weathers.size());
 }
 
 TEST(TokenizerTrain, BadInputsAreClearErrors) {

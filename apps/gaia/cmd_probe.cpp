@@ -64,9 +64,9 @@ void register_probe(CLI::App& app) {
       auto net = probe::load_probe(*weights, dev);
       data::Dataset ds(*dataset);
       const int stride = net->kind == probe::ProbeKind::kDynamics ? probe::dynamics_stride(c) : 0;
-      auto set = probe::held_out_examples(ds, c.run.seed, stride, std::max(1, *n));
+      auto set = data::held_out_frames(ds, c.run.seed, stride, std::max(1, *n));
       auto j = probe::score(net->kind, probe::predict(net, set, stride, dev),
-                            probe::targets(net->kind, set.episodes, set.examples, stride));
+                            probe::targets(net->kind, set.episodes, set.frames, stride));
       if (!flags->out.empty()) {
         fs::create_directories(flags->out);
         write_file_atomic(fs::path(flags->out) / "probe_eval.json", j.dump(2) + "\n");

@@ -8,9 +8,10 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
+#include "gaia/data/frame_set.h"
 #include "gaia/data/geofence.h"
 #include "gaia/data/video_io.h"
-#include "gaia/eval/metrics.h"
+#include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
 #include "gaia/tokenizer/trainer.h"
@@ -26,8 +27,7 @@ std::vector<cv::Mat> load_frames(const std::string& src, int h, int w, int max_f
   if (fs::exists(fs::path(src) / "dataset.json")) {
     data::Dataset ds(src);
     data::Split sp = data::load_or_default_split(ds);
-    std::vector<std::string> ids = sp.val_geofence;
-    ids.insert(ids.end(), sp.val_random.begin(), sp.val_random.end());
+    std::vector<std::string> ids = sp.held_out();
     if (ids.empty()) ids = ds.ids();
     for (size_t e : data::episode_indices(ds, ids)) {
       data::Episode ep = ds.episode(e);
@@ -117,28 +117,28 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("SOURCE", *src, "dataset (its validation episodes) or a video file")->required();
     cmd->add_option("--tokenizer", *weights, "tokenizer weights (safetensors)")->required();
     cmd->add_option("--max-frames", *max_frames, "frames to score");
-    cmd->add_option("--stride", *stride, "use every Nth frame");
+    cmd->add_option("--stride", *stride, "video: use every Nth frame (a dataset's frames are spread evenly over its held-out episodes)");
     add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)");
     cmd->callback([=] {
       auto [dev, c, t] = open_tokenizer(*flags, *weights);
-      auto frames = load_frames(*src, c.data.height, c.data.width, *max_frames, *stride);
-      ProgressBar bar(static_cast<int64_t>(frames.size()), "eval");
-      double p = 0, s = 0;
-      std::vector<int64_t> counts(static_cast<size_t>(c.tokenizer.codebook_size), 0);
-      for (size_t b = 0; b < frames.size(); b += 16) {
-        std::vector<cv::Mat> chunk(frames.begin() + static_cast<long>(b), frames.begin() + static_cast<long>(std::min(frames.size(), b + 16)));
-        auto tokens = tokenizer::encode_frames(t, chunk, dev);
-        auto rec = tokenizer::decode_tokens(t, tokens, dev);
-        auto flat = tokens.reshape({-1});
-        for (int64_t i = 0; i < flat.size(0); ++i) counts[static_cast<size_t>(flat[i].item<int64_t>())]++;
-        for (size_t i = 0; i < chunk.size(); ++i) { p += eval::psnr(chunk[i], rec[i]); s += eval::ssim(chunk[i], rec[i]); }
-        bar.update(static_cast<int64_t>(b + chunk.size()));
+      std::vector<cv::Mat> frames;
+      std::vector<tokenizer::FrameTags> tags;
+      if (fs::exists(fs::path(*src) / "dataset.json")) {
+        // Spread over every held-out episode (so over every weather and time of day), not the first few drives.
+        data::Dataset ds(*src);
+        auto set = data::held_out_frames(ds, c.run.seed, 0, std::max(1, *max_frames));
+        for (const auto& f : set.frames) {
+          const data::Episode& ep = *set.episodes[f.episode];
+          frames.push_back(data::resize_center_crop(ep.frame_bgr(f.frame), c.data.height, c.data.width));
+          tags.push_back({{"weather", ep.meta().weather}, {"time_of_day", ep.meta().time_of_day}});
+        }
+      } else {
+        frames = load_frames(*src, c.data.height, c.data.width, *max_frames, *stride);
       }
+      ProgressBar bar(static_cast<int64_t>(frames.size()), "eval");
+      auto j = tokenizer::evaluate_reconstruction(t, c, frames, tags, dev, [&](int64_t n) { bar.update(n); });
       bar.finish();
-      auto cs = eval::code_stats(counts);
-      nlohmann::json j = {{"source", *src}, {"frames", frames.size()}, {"psnr", p / double(frames.size())},
-                          {"ssim", s / double(frames.size())}, {"code_usage", cs.usage}, {"code_perplexity", cs.perplexity},
-                          {"bit_compression", eval::bit_compression(c.data.height, c.data.width, c.image_tokens(), c.tokenizer.codebook_size)}};
+      j["source"] = *src;
       std::printf("%s\n", j.dump(2).c_str());
       if (!flags->out.empty()) write_file_atomic(flags->out, j.dump(2) + "\n");
     });

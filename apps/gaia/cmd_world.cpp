@@ -76,8 +76,7 @@ void register_world(CLI::App& app) {
       if (ds.tokens_per_step() != info.n())
         fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
       auto split = ds.split(0.1, info.config.run.seed);
-      auto ids = split.val_geofence;
-      ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+      auto ids = split.held_out();
       if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
       auto eps = ds.indices(ids);
       auto windows = world::validation_windows(ds, eps, info.config.world.context_steps, *max_windows);

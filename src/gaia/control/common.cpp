@@ -33,8 +33,7 @@ Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::p
 
 Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed) {
   auto split = ds.split(0.1, seed);
-  auto ids = split.val_geofence;
-  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  auto ids = split.held_out();
   const int64_t skip = int64_t(std::lround(ds.rate_hz() > 0 ? ds.rate_hz() : 6.25));  // the first second
   std::vector<std::pair<size_t, int64_t>> pool;  // (episode, start): every held-out window, then spread
   for (size_t e : ds.indices(ids))

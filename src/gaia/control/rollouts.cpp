@@ -32,8 +32,7 @@ struct RealReference {
 
 RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t window, int max_frames, uint64_t seed) {
   auto split = ds.split(0.1, seed);
-  auto ids = split.val_geofence;
-  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  auto ids = split.held_out();
   RealReference r;
   std::vector<torch::Tensor> picks;
   const int64_t n = ds.tokens_per_step();

@@ -27,6 +27,12 @@ GeoBox parse_geobox(const std::string& s) {
   return b;
 }
 
+std::vector<std::string> Split::held_out() const {
+  std::vector<std::string> ids = val_geofence;
+  ids.insert(ids.end(), val_random.begin(), val_random.end());
+  return ids;
+}
+
 nlohmann::json Split::to_json() const {
   return {{"train", train}, {"val_geofence", val_geofence}, {"val_random", val_random}};
 }

@@ -22,6 +22,8 @@ GeoBox parse_geobox(const std::string& s);  // "lat_min,lon_min,lat_max,lon_max"
 
 struct Split {
   std::vector<std::string> train, val_geofence, val_random;
+  // Every held-out episode: the geofenced ones first, then the random hold-out.
+  std::vector<std::string> held_out() const;
   nlohmann::json to_json() const;
   static Split from_json(const nlohmann::json& j, const std::string& where);
 };

@@ -38,8 +38,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   const torch::Device dev = model->parameters().front().device();
   data::Dataset ds(dataset);
   auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
-  auto ids = split.val_geofence;
-  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
+  auto ids = split.held_out();
   if (ids.empty()) ids = ds.ids();
   auto eps = data::episode_indices(ds, ids);
   const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz

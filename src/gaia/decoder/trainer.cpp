@@ -119,8 +119,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
 
   data::Dataset ds(opt.dataset);
   data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
-  auto val_ids = split.val_geofence;
-  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  auto val_ids = split.held_out();
   const int T = dc.frames;
   ClipPool train = make_pool(ds, data::episode_indices(ds, split.train), T, true);
   for (int r = 0; r < 3; ++r)

@@ -37,8 +37,10 @@ double ssim(const cv::Mat& a, const cv::Mat& b) {
   };
   cv::Mat mx = blur(x), my = blur(y);
   cv::Mat sxx = blur(x.mul(x)) - mx.mul(mx), syy = blur(y.mul(y)) - my.mul(my), sxy = blur(x.mul(y)) - mx.mul(my);
-  cv::Mat num = (2 * mx.mul(my) + C1).mul(2 * sxy + C2);
-  cv::Mat den = (mx.mul(mx) + my.mul(my) + C1).mul(sxx + syy + C2);
+  // Scalar::all: a bare double added to a multi-channel matrix inside a product reaches only the first channel.
+  const cv::Scalar c1 = cv::Scalar::all(C1), c2 = cv::Scalar::all(C2);
+  cv::Mat num = (2 * mx.mul(my) + c1).mul(2 * sxy + c2);
+  cv::Mat den = (mx.mul(mx) + my.mul(my) + c1).mul(sxx + syy + c2);
   cv::Mat s;
   cv::divide(num, den, s);
   cv::Scalar m = cv::mean(s);

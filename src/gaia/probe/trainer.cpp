@@ -4,6 +4,7 @@
 #include <random>
 
 #include "gaia/core/error.h"
+#include "gaia/data/frame_set.h"
 #include "gaia/data/geofence.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/tokenizer/autoencoder.h"
@@ -75,36 +76,13 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
   return torch::tensor(v, torch::kLong).view({int64_t(ex.size()), 4});
 }
 
-ExampleSet example_set(const data::Dataset& ds, const std::vector<std::string>& ids, int stride, int n) {
-  ExampleSet s;
-  std::vector<Example> all;
-  for (size_t e : data::episode_indices(ds, ids)) {
-    s.episodes.push_back(std::make_unique<data::Episode>(ds.episode(e)));
-    for (int64_t i = 0; i + stride < s.episodes.back()->size(); ++i) all.push_back({s.episodes.size() - 1, i});
-  }
-  if (n <= 0 || size_t(n) >= all.size()) {
-    s.examples = std::move(all);
-  } else {
-    for (size_t k = 0; k < size_t(n); ++k) s.examples.push_back(all[k * all.size() / size_t(n)]);
-  }
-  return s;
-}
-
-ExampleSet held_out_examples(const data::Dataset& ds, uint64_t seed, int stride, int n) {
-  auto split = data::load_or_default_split(ds, 0.1, seed);
-  auto ids = split.val_geofence;
-  ids.insert(ids.end(), split.val_random.begin(), split.val_random.end());
-  if (ids.empty()) ids = ds.ids();
-  return example_set(ds, ids, stride, n);
-}
-
 torch::Tensor predict(ProbeNet& net, const ExampleSet& s, int stride, const torch::Device& dev) {
   torch::NoGradGuard ng;
   const bool was_training = net->is_training();
   net->eval();
   std::vector<torch::Tensor> preds;
-  for (size_t i = 0; i < s.examples.size(); i += 64) {
-    std::vector<Example> part(s.examples.begin() + long(i), s.examples.begin() + long(std::min(s.examples.size(), i + 64)));
+  for (size_t i = 0; i < s.frames.size(); i += 64) {
+    std::vector<Example> part(s.frames.begin() + long(i), s.frames.begin() + long(std::min(s.frames.size(), i + 64)));
     preds.push_back(net->forward(inputs(net->kind, s.episodes, part, stride).to(dev)).cpu());
   }
   net->train(was_training);
@@ -168,15 +146,14 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   ProbeTrainResult result;
   data::Dataset ds(opt.dataset);
   auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
-  auto val_ids = split.val_geofence;
-  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  auto val_ids = split.held_out();
   const int stride = opt.kind == ProbeKind::kDynamics ? dynamics_stride(cfg) : 0;
-  auto train = example_set(ds, split.train, stride, 0);
-  auto val = example_set(ds, val_ids, stride, opt.val_examples);
+  auto train = data::frame_set(ds, split.train, stride, 0);
+  auto val = data::frame_set(ds, val_ids, stride, opt.val_examples);
   const auto& train_eps = train.episodes;
-  const auto& train_ex = train.examples;
+  const auto& train_ex = train.frames;
   if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
-  if (val.examples.empty() && on_note) on_note("no held-out episodes: validation skipped");
+  if (val.frames.empty() && on_note) on_note("no held-out episodes: validation skipped");
 
   torch::manual_seed(cfg.run.seed);
   ProbeNet net(opt.kind);
@@ -195,8 +172,8 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   auto save = [&] { train::save_checkpoint(ckpt, {{"probe", net.ptr().get()}}, {{"probe", optim.get()}}, {step, {}}); };
   auto validate = [&] {
     nlohmann::json v;
-    if (val.examples.empty()) return v;
-    return score(opt.kind, predict(net, val, stride, dev), targets(opt.kind, val.episodes, val.examples, stride));
+    if (val.frames.empty()) return v;
+    return score(opt.kind, predict(net, val, stride, dev), targets(opt.kind, val.episodes, val.frames, stride));
   };
   net->train();
   while (step < opt.steps) {

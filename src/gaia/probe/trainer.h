@@ -8,6 +8,7 @@
 
 #include "gaia/core/config.h"
 #include "gaia/data/episode.h"
+#include "gaia/data/frame_set.h"
 #include "gaia/probe/probe.h"
 
 namespace gaia::probe {
@@ -16,10 +17,8 @@ namespace gaia::probe {
 torch::Tensor probe_input(const std::vector<cv::Mat>& frames);
 
 // One labelled example: frame i of an episode (and frame i + stride for dynamics).
-struct Example {
-  size_t episode;
-  int64_t frame;
-};
+using Example = data::FrameRef;
+using ExampleSet = data::FrameSet;
 // The native frames between the two inputs of the dynamics probe: one world-model step (25 Hz / 6.25 Hz = 4).
 int dynamics_stride(const Config& c);
 // Targets of examples: dynamics [N, 2] normalised speed/curvature averaged over the step; scene [N, 4] int64 class
@@ -29,14 +28,6 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
 torch::Tensor inputs(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
                      const std::vector<Example>& ex, int stride);
 
-// Episodes and examples: `ids`' episodes opened, and n examples evenly spaced over all their frames (all if n <= 0).
-struct ExampleSet {
-  std::vector<std::unique_ptr<data::Episode>> episodes;
-  std::vector<Example> examples;
-};
-ExampleSet example_set(const data::Dataset& ds, const std::vector<std::string>& ids, int stride, int n);
-// The held-out split's examples (every episode when the dataset has no held-out split).
-ExampleSet held_out_examples(const data::Dataset& ds, uint64_t seed, int stride, int n);
 // Network outputs for a set, in batches (no gradients) -> [N, outputs] on the CPU.
 torch::Tensor predict(ProbeNet& net, const ExampleSet& s, int stride, const torch::Device& dev);
 

@@ -51,8 +51,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   data::Dataset ds(opt.dataset);
   data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
   auto train_eps = data::episode_indices(ds, split.train);
-  auto val_ids = split.val_geofence;
-  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  auto val_ids = split.held_out();
   auto val_eps = data::episode_indices(ds, val_ids);
   data::FrameSampler train(ds, train_eps, cfg.data.height, cfg.data.width, cfg.data.balance_tokenizer,
                            cfg.data.balance_exponent, cfg.data.balance_bins);

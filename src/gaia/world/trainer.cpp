@@ -30,8 +30,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const int64_t T = wc.context_steps;
   auto split = ds.split(0.1, cfg.run.seed);
   auto train_eps = ds.indices(split.train);
-  auto val_ids = split.val_geofence;
-  val_ids.insert(val_ids.end(), split.val_random.begin(), split.val_random.end());
+  auto val_ids = split.held_out();
   auto val_eps = ds.indices(val_ids);
   auto train_windows = ds.windows(train_eps, T, 1);
   if (train_windows.empty())

@@ -1,0 +1,28 @@
+#include "gaia/data/frame_set.h"
+
+#include "gaia/data/geofence.h"
+
+namespace gaia::data {
+
+FrameSet frame_set(const Dataset& ds, const std::vector<std::string>& ids, int margin, int n) {
+  FrameSet s;
+  std::vector<FrameRef> all;
+  for (size_t e : episode_indices(ds, ids)) {
+    s.episodes.push_back(std::make_unique<Episode>(ds.episode(e)));
+    for (int64_t i = 0; i + margin < s.episodes.back()->size(); ++i) all.push_back({s.episodes.size() - 1, i});
+  }
+  if (n <= 0 || size_t(n) >= all.size()) {
+    s.frames = std::move(all);
+  } else {
+    for (size_t k = 0; k < size_t(n); ++k) s.frames.push_back(all[k * all.size() / size_t(n)]);
+  }
+  return s;
+}
+
+FrameSet held_out_frames(const Dataset& ds, uint64_t seed, int margin, int n) {
+  auto ids = load_or_default_split(ds, 0.1, seed).held_out();
+  if (ids.empty()) ids = ds.ids();
+  return frame_set(ds, ids, margin, n);
+}
+
+}  // namespace gaia::data
