@@ -26,10 +26,7 @@ std::vector<cv::Mat> load_frames(const std::string& src, int h, int w, int max_f
   std::vector<cv::Mat> frames;
   if (fs::exists(fs::path(src) / "dataset.json")) {
     data::Dataset ds(src);
-    data::Split sp = data::load_or_default_split(ds);
-    std::vector<std::string> ids = sp.held_out();
-    if (ids.empty()) ids = ds.ids();
-    for (size_t e : data::episode_indices(ds, ids)) {
+    for (size_t e : data::episode_indices(ds, data::held_out_ids(ds, 0))) {
       data::Episode ep = ds.episode(e);
       for (int64_t i = 0; i < ep.size() && static_cast<int>(frames.size()) < max_frames; i += stride)
         frames.push_back(data::resize_center_crop(ep.frame_bgr(i), h, w));

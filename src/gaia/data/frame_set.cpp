@@ -19,10 +19,13 @@ FrameSet frame_set(const Dataset& ds, const std::vector<std::string>& ids, int m
   return s;
 }
 
-FrameSet held_out_frames(const Dataset& ds, uint64_t seed, int margin, int n) {
+std::vector<std::string> held_out_ids(const Dataset& ds, uint64_t seed) {
   auto ids = load_or_default_split(ds, 0.1, seed).held_out();
-  if (ids.empty()) ids = ds.ids();
-  return frame_set(ds, ids, margin, n);
+  return ids.empty() ? ds.ids() : ids;
+}
+
+FrameSet held_out_frames(const Dataset& ds, uint64_t seed, int margin, int n) {
+  return frame_set(ds, held_out_ids(ds, seed), margin, n);
 }
 
 }  // namespace gaia::data

@@ -6,6 +6,7 @@
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/data/clip_sampler.h"
+#include "gaia/data/frame_set.h"
 #include "gaia/data/geofence.h"
 #include "gaia/decoder/trainer.h"
 #include "gaia/decoder/video.h"
@@ -37,10 +38,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   torch::NoGradGuard ng;
   const torch::Device dev = model->parameters().front().device();
   data::Dataset ds(dataset);
-  auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
-  auto ids = split.held_out();
-  if (ids.empty()) ids = ds.ids();
-  auto eps = data::episode_indices(ds, ids);
+  auto eps = data::episode_indices(ds, data::held_out_ids(ds, cfg.run.seed));
   const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz
   std::vector<std::unique_ptr<data::Episode>> episodes;
   std::vector<ClipRef> refs;
