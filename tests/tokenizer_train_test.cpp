@@ -14,6 +14,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
+#include "gaia/plan/plan.h"
 #include "gaia/synth/synth.h"
 #include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
@@ -159,6 +160,66 @@ TEST(TokenizerTrain, InitFineTunesFromWeightsAndBalancesTheGanGradient) {
   std::string err = test::error_of([&] { tokenizer::train_tokenizer(wide, o); });
   EXPECT_NE(err.find("tokenizer.safetensors"), std::string::npos) << err;
   EXPECT_NE(err.find("shape"), std::string::npos) << err;
+}
+
+TEST(TokenizerTrain, DecoderOnlyGrowsRefineBlocksAndKeepsEveryCode) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 0.4);
+  train_two_steps(dir / "ds", dir / "base");
+  auto base = tokenizer::load_tokenizer(dir / "base" / "tokenizer.safetensors", torch::kCPU);
+  Config g = tiny();
+  g.tokenizer.refine_blocks = 2;
+  g.tokenizer.disc_start = 1000000;
+  ASSERT_EQ(tokenizer::ImageTokenizer(g)->parameter_count(), plan::tokenizer_params(g).total);
+  tokenizer::TrainOptions o;
+  o.dataset = dir / "ds";
+  o.decoder_only = true;
+  o.steps = 6;
+  // Without weights to freeze there is nothing to decode: a clear error.
+  o.out = dir / "none";
+  std::string err = test::error_of([&] { tokenizer::train_tokenizer(g, o); });
+  EXPECT_NE(err.find("--init"), std::string::npos) << err;
+
+  data::Dataset ds(dir / "ds");
+  data::Episode ep = ds.episode(0);
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < ep.size(); ++i) frames.push_back(ep.frame_bgr(i));
+  auto base_codes = tokenizer::encode_frames(base, frames, torch::kCPU);
+  auto base_rec = tokenizer::decode_tokens(base, base_codes, torch::kCPU);
+
+  // Grown with a zero learning rate: the refinement blocks start as identities, so every output is unchanged.
+  o.init = dir / "base" / "tokenizer.safetensors";
+  Config z = g;
+  z.tokenizer.lr = z.tokenizer.final_lr = 0;
+  o.out = dir / "grown";
+  o.steps = 1;
+  tokenizer::train_tokenizer(z, o);
+  Config loaded;
+  auto grown = tokenizer::load_tokenizer(dir / "grown" / "tokenizer.safetensors", torch::kCPU, &loaded);
+  EXPECT_EQ(loaded.tokenizer.refine_blocks, 2);  // the architecture travels in the weights' metadata
+  auto grown_rec = tokenizer::decode_tokens(grown, base_codes, torch::kCPU);
+  for (size_t i = 0; i < frames.size(); ++i) EXPECT_EQ(cv::norm(base_rec[i], grown_rec[i], cv::NORM_INF), 0) << i;
+
+  // Trained: the decoder moves, the encoder and codebook do not move by a bit, and every frame keeps its codes.
+  g.tokenizer.lr = g.tokenizer.final_lr = 2e-3;
+  o.out = dir / "refined";
+  o.steps = 6;
+  o.restart_every = 2;  // dead-code restarts would move the codebook; decoder-only skips them
+  auto r = tokenizer::train_tokenizer(g, o);
+  EXPECT_EQ(r.final_step, 6);
+  SafetensorsFile a(dir / "base" / "tokenizer.safetensors"), b(dir / "refined" / "tokenizer.safetensors");
+  int moved = 0;
+  for (auto& n : b.names()) {
+    if (n.rfind("decoder.", 0) == 0) {
+      moved += !a.contains(n) || !torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)));
+      continue;
+    }
+    ASSERT_TRUE(a.contains(n)) << n;
+    EXPECT_TRUE(torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)))) << n;
+  }
+  EXPECT_GT(moved, 10);
+  auto refined = tokenizer::load_tokenizer(dir / "refined" / "tokenizer.safetensors", torch::kCPU);
+  EXPECT_TRUE(torch::equal(tokenizer::encode_frames(refined, frames, torch::kCPU), base_codes));
 }
 
 TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {

@@ -77,6 +77,9 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_flag("--decoder-only", o->decoder_only,
+                  "train only the decoder (needs --init): encoder and codebook frozen, so every frame keeps its codes "
+                  "and token datasets made with the --init weights stay valid");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, tokenizer.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);

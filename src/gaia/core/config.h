@@ -30,6 +30,10 @@ struct TokenizerConfig {
   int channels = 32;             // base width of the encoder/decoder (CPU-sized; paper scale: see paper.yaml)
   std::vector<int> channel_mult{1, 2, 2, 4};  // one entry per resolution level; log2(D) downsamplings
   int res_blocks = 1;            // ResNet blocks per level (the decoder uses one more)
+  // Extra ResNet blocks at full resolution at the end of the decoder (not in the paper). Their last convolution starts
+  // at zero, so they can be added to trained weights without changing a single output, then trained with the
+  // encoder frozen (`--decoder-only`): more reconstruction capacity where the error is, same codes.
+  int refine_blocks = 0;
   int z_channels = 128;          // width at the bottleneck before the code projection
   int disc_channels = 32;        // PatchGAN discriminator width
   int disc_layers = 3;

@@ -54,7 +54,7 @@ ParamCount tokenizer_params(const Config& cfg) {
     for (int r = 0; r < t.res_blocks + 1; ++r) { p += res_block(c, co); c = co; }
     if (i > 0) p += conv(c, c, 3);
   }
-  p += group_norm(c) + conv(c, 3, 3);
+  p += t.refine_blocks * res_block(c, c) + group_norm(c) + conv(c, 3, 3);
   ParamCount out;
   out.total = p;
   out.non_embedding = p - codebook;

@@ -38,12 +38,24 @@ DecoderImpl::DecoderImpl(const TokenizerConfig& t) {
     if (i > 0) body->push_back(Upsample(c));
   }
   register_module("body", body);
+  if (t.refine_blocks > 0) {
+    refine = register_module("refine", torch::nn::Sequential());
+    for (int r = 0; r < t.refine_blocks; ++r) {
+      ResBlock b(c, c);
+      torch::NoGradGuard ng;
+      b->conv2->weight.zero_();  // identity at the start: growing a trained decoder keeps its outputs
+      b->conv2->bias.zero_();
+      refine->push_back(b);
+    }
+  }
   norm_out = register_module("norm_out", group_norm(c));
   conv_out = register_module("conv_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(c, 3, 3).padding(1)));
 }
 
 torch::Tensor DecoderImpl::forward(torch::Tensor z) {
-  return conv_out(F::silu(norm_out(body->forward(conv_in(z)))));
+  auto h = body->forward(conv_in(z));  // [B, channels * channel_mult[0], H, W]
+  if (refine) h = refine->forward(h);
+  return conv_out(F::silu(norm_out(h)));
 }
 
 ImageTokenizerImpl::ImageTokenizerImpl(const Config& c, int64_t dino_dim)

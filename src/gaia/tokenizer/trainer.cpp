@@ -77,7 +77,13 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   PatchDiscriminator disc(tc);
   model->to(dev);
   disc->to(dev);
-  auto opt_g = train::make_adamw(model->parameters(), tc.lr, tc.weight_decay, tc.beta1, tc.beta2);
+  if (opt.decoder_only) {
+    if (opt.init.empty() && !train::has_checkpoint(opt.out / "checkpoint"))
+      fail("tokenizer train --decoder-only: needs --init weights (the frozen encoder and codebook to decode)");
+    for (auto& p : model->encoder->parameters()) p.set_requires_grad(false);
+    for (auto& p : model->quantizer->parameters()) p.set_requires_grad(false);
+  }
+  auto opt_g = train::make_adamw(opt.decoder_only ? model->decoder->parameters() : model->parameters(), tc.lr, tc.weight_decay, tc.beta1, tc.beta2);
   auto opt_d = train::make_adamw(disc->parameters(), tc.lr, tc.weight_decay, tc.beta1, tc.beta2);
   const int total = opt.steps > 0 ? opt.steps : tc.steps;
   train::WarmupCosine sched{tc.lr, tc.final_lr, tc.warmup_steps, total};
@@ -97,8 +103,10 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     // Fine-tuning: weights from an earlier run, fresh optimiser and schedule. The architecture must match.
     Config init_cfg;
     auto init = load_tokenizer(opt.init, dev, &init_cfg, &cfg);
-    // the DINO head is trained from scratch
-    train::init_from(*model, *init, opt.init, [](const std::string& k) { return k.rfind("dino_head.", 0) == 0; });
+    // the DINO head and any refinement blocks the --init weights lack start fresh (refinement blocks as identities)
+    train::init_from(*model, *init, opt.init, [](const std::string& k) {
+      return k.rfind("dino_head.", 0) == 0 || k.rfind("decoder.refine.", 0) == 0;
+    });
     note("initialised from " + opt.init.string());
   }
   fs::create_directories(opt.out);
@@ -154,7 +162,8 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     auto o = model->forward(x);
     auto l1 = (o.reconstruction - x).abs().mean();
     auto l2 = (o.reconstruction - x).pow(2).mean();
-    auto loss = tc.w_l1 * l1 + tc.w_l2 * l2 + tc.w_codebook * (o.q.codebook_loss + tc.commitment * o.q.commit_loss);
+    auto loss = tc.w_l1 * l1 + tc.w_l2 * l2;
+    if (!opt.decoder_only) loss = loss + tc.w_codebook * (o.q.codebook_loss + tc.commitment * o.q.commit_loss);
     nlohmann::json terms = {{"l1", l1.item<double>()}, {"l2", l2.item<double>()},
                             {"codebook", o.q.codebook_loss.item<double>()}};
     if (vgg) {
@@ -162,7 +171,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       loss = loss + tc.w_perceptual * lp;
       terms["perceptual"] = lp.item<double>();
     }
-    if (dino) {
+    if (dino && !opt.decoder_only) {
       torch::Tensor target;
       {
         torch::NoGradGuard ng;
@@ -212,7 +221,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       for (int64_t i = 0; i < idx.size(0); ++i) usage[static_cast<size_t>(acc[i])]++;
     }
     ++step;
-    if (opt.restart_every > 0 && step % opt.restart_every == 0 && step < total) {
+    if (opt.restart_every > 0 && !opt.decoder_only && step % opt.restart_every == 0 && step < total) {
       torch::NoGradGuard ng;
       auto ze = F::normalize(model->quantizer->proj_in(model->encoder->forward(x).permute({0, 2, 3, 1}).reshape({-1, tc.z_channels})),
                              F::NormalizeFuncOptions().dim(1));

@@ -20,6 +20,9 @@ struct TrainOptions {
   int val_every = 250;            // steps between validations
   int val_frames = 32;            // held-out frames scored at each validation
   int restart_every = 200;        // dead-code restart interval (0 = off)
+  // Train the decoder alone: encoder and quantiser frozen, no codebook/DINO losses and no dead-code restarts, so
+  // every frame keeps exactly the codes of the --init weights and token datasets made with them stay valid.
+  bool decoder_only = false;
   int stop_after = -1;            // stop (with a checkpoint) after this many steps in this run; for tests
 };
 
