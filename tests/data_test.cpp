@@ -10,6 +10,7 @@
 #include "gaia/data/ingest.h"
 #include "gaia/data/signals.h"
 #include "gaia/data/video_io.h"
+#include "gaia/synth/synth.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -244,4 +245,34 @@ TEST(ClipSampler, RatesByTimestamps) {
     ASSERT_EQ(idx.size(), 26u) << fps;
     for (size_t k = 0; k < idx.size(); ++k) EXPECT_LE(std::abs(t[static_cast<size_t>(idx[k])] - (0.1 + k / 6.25)), 0.5 / fps + 1e-9);
   }
+}
+
+TEST(ClipSampler, SpreadClipsCoverEveryEpisodeAwayFromTheStart) {
+  test::TempDir dir;
+  synth::SynthOptions o;
+  o.height = 16;
+  o.width = 32;
+  o.seed = 3;
+  o.seconds = 2.0;  // 50 frames at 25 Hz
+  for (int e = 0; e < 3; ++e) synth::write_episode(dir / "ds", o, e);
+  o.seconds = 0.2;  // 5 frames: too short for a 9-frame clip
+  synth::write_episode(dir / "ds", o, 3);
+  Dataset ds(dir / "ds");
+  ASSERT_EQ(ds.size(), 4u);
+  // One clip per episode, each a fraction (i + 0.5) / 4 of the way through its 50 - 8 possible starts; the short
+  // episode is skipped.
+  auto c = spread_clips(ds, {0, 1, 2, 3}, 9, 25.0, 4);
+  ASSERT_EQ(c.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(c[i].episode, i);
+    ASSERT_EQ(c[i].frames.size(), 9u);
+    for (size_t k = 1; k < 9; ++k) EXPECT_EQ(c[i].frames[k], c[i].frames[k - 1] + 1);
+    EXPECT_NEAR(double(c[i].frames[0]), (i + 0.5) / 4 * 41, 1.0) << i;
+  }
+  // More clips than episodes: two per episode, at different places.
+  auto d = spread_clips(ds, {0, 1, 2}, 9, 25.0, 6);
+  ASSERT_EQ(d.size(), 6u);
+  for (size_t i = 0; i < 6; ++i) EXPECT_EQ(d[i].episode, i / 2) << i;
+  for (size_t i = 0; i < 6; i += 2) EXPECT_LT(d[i].frames[0], d[i + 1].frames[0]) << i;
+  EXPECT_TRUE(spread_clips(ds, {}, 9, 25.0, 3).empty());
 }

@@ -75,6 +75,8 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
   EXPECT_EQ(j["frames_25hz"].get<int>(), 9);
+  ASSERT_EQ(j["clip_starts"].size(), 1u);  // where the scored clip lies: a held-out episode, past its start
+  EXPECT_GT(j["clip_starts"][0]["start_s"].get<double>(), 0.0);
   EXPECT_GT(j["video_decoder"]["2"]["psnr_25hz"].get<double>(), 0);
   EXPECT_GT(j["tokenizer_decoder"]["psnr_6.25hz"].get<double>(), 0);
   EXPECT_GT(j["video_decoder"]["1"]["seconds_per_ddim_step"].get<double>(), 0);

@@ -40,4 +40,22 @@ std::vector<ClipRef> enumerate_clips(const Dataset& ds, const std::vector<size_t
   return out;
 }
 
+std::vector<ClipRef> spread_clips(const Dataset& ds, const std::vector<size_t>& episodes, int T, double rate, int count) {
+  std::vector<ClipRef> out;
+  const size_t E = episodes.size();
+  for (int i = 0; i < count && E > 0; ++i) {
+    const size_t e = episodes[size_t(i) * E / size_t(count)];
+    Episode ep = ds.episode(e);
+    const auto& times = ep.times();
+    // the last start that still fits: a clip spans (T - 1) / rate seconds
+    const double last = times.back() - (T - 1) / rate;
+    if (last < times.front()) continue;
+    const double t0 = times.front() + (last - times.front()) * (i + 0.5) / count;
+    auto idx = clip_indices(times, t0, T, rate);
+    if (idx.empty()) idx = clip_indices(times, times.front(), T, rate);  // rounding at the very end
+    if (!idx.empty()) out.push_back(ClipRef{e, std::move(idx)});
+  }
+  return out;
+}
+
 }  // namespace gaia::data

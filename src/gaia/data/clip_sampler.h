@@ -23,4 +23,10 @@ struct ClipRef {
 std::vector<ClipRef> enumerate_clips(const Dataset& ds, const std::vector<size_t>& episodes, int T, double rate,
                                      double stride_s);
 
+// `count` clips spread over an episode list, for evaluation: clip i comes from episodes[i * E / count], starting a
+// fraction (i + 0.5) / count of the way through that episode's possible starts. The first clip of the first few
+// episodes would score a few drive starts (one weather, the car pulling away); this scores the whole set.
+// Episodes too short for a clip are skipped, so fewer than `count` may come back.
+std::vector<ClipRef> spread_clips(const Dataset& ds, const std::vector<size_t>& episodes, int T, double rate, int count);
+
 }  // namespace gaia::data

@@ -42,12 +42,11 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz
   std::vector<std::unique_ptr<data::Episode>> episodes;
   std::vector<ClipRef> refs;
-  for (size_t e : eps) {
-    if (int(refs.size()) >= o.clips) break;
-    auto clips = data::enumerate_clips(ds, {e}, M, 25.0, 1e9);  // the first clip of each held-out episode
-    if (clips.empty()) continue;
-    refs.push_back({episodes.size(), clips[0].frames});
-    episodes.push_back(std::make_unique<data::Episode>(ds.episode(e)));
+  nlohmann::json where = nlohmann::json::array();
+  for (auto& c : data::spread_clips(ds, eps, M, 25.0, o.clips)) {  // spread over every held-out drive
+    episodes.push_back(std::make_unique<data::Episode>(ds.episode(c.episode)));
+    where.push_back({{"episode", ds.ids()[c.episode]}, {"start_s", episodes.back()->times()[size_t(c.frames[0])]}});
+    refs.push_back({episodes.size() - 1, c.frames});
   }
   if (refs.empty()) fail("{}: no held-out episode has {} frames at 25 Hz for a {}-frame token clip", dataset.string(), M, N);
   NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
@@ -59,6 +58,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
 
   nlohmann::json out;
   out["clips"] = refs.size();
+  out["clip_starts"] = where;
   out["token_frames"] = N;
   out["frames_25hz"] = M;
   out["noise_correlation"] = d.sample.noise_correlation;
