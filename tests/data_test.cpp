@@ -10,7 +10,6 @@
 #include "gaia/data/ingest.h"
 #include "gaia/data/signals.h"
 #include "gaia/data/video_io.h"
-#include "gaia/synth/synth.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -249,14 +248,8 @@ TEST(ClipSampler, RatesByTimestamps) {
 
 TEST(ClipSampler, SpreadClipsCoverEveryEpisodeAwayFromTheStart) {
   test::TempDir dir;
-  synth::SynthOptions o;
-  o.height = 16;
-  o.width = 32;
-  o.seed = 3;
-  o.seconds = 2.0;  // 50 frames at 25 Hz
-  for (int e = 0; e < 3; ++e) synth::write_episode(dir / "ds", o, e);
-  o.seconds = 0.2;  // 5 frames: too short for a 9-frame clip
-  synth::write_episode(dir / "ds", o, 3);
+  test::synth_dataset(dir / "ds", 3, 2.0, 0, 16, 32);  // 50 frames at 25 Hz
+  test::synth_dataset(dir / "ds", 1, 0.2, 3, 16, 32);  // 5 frames: too short for a 9-frame clip
   Dataset ds(dir / "ds");
   ASSERT_EQ(ds.size(), 4u);
   // One clip per episode, each a fraction (i + 0.5) / 4 of the way through its 50 - 8 possible starts; the short

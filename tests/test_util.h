@@ -9,6 +9,7 @@
 
 #include "gaia/core/error.h"
 #include "gaia/core/fs.h"
+#include "gaia/synth/synth.h"
 
 namespace gaia::test {
 
@@ -26,6 +27,16 @@ struct TempDir {
   }
   fs::path operator/(const std::string& s) const { return path / s; }
 };
+
+// Episodes first .. first + count - 1 of a small procedural dataset (32x64 by default, the tiny config's size).
+inline void synth_dataset(const fs::path& dir, int count, double seconds, int first = 0, int height = 32, int width = 64) {
+  synth::SynthOptions o;
+  o.height = height;
+  o.width = width;
+  o.seconds = seconds;
+  o.seed = 5;
+  for (int e = first; e < first + count; ++e) synth::write_episode(dir, o, e);
+}
 
 struct RunResult {
   int status = -1;

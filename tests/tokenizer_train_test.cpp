@@ -15,7 +15,6 @@
 #include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/plan/plan.h"
-#include "gaia/synth/synth.h"
 #include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
@@ -34,14 +33,7 @@ Config tiny() {
 }
 
 // A tiny synth dataset at the tiny config's 32x64.
-void make_dataset(const fs::path& dir, int episodes, double seconds) {
-  synth::SynthOptions o;
-  o.height = 32;
-  o.width = 64;
-  o.seconds = seconds;
-  o.seed = 5;
-  for (int e = 0; e < episodes; ++e) synth::write_episode(dir, o, e);
-}
+void make_dataset(const fs::path& dir, int episodes, double seconds) { test::synth_dataset(dir, episodes, seconds); }
 
 // A barely trained tiny tokenizer at RUN/tokenizer.safetensors: enough to test what consumes one.
 void train_two_steps(const fs::path& dataset, const fs::path& run) {

@@ -13,7 +13,6 @@
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
 #include "gaia/data/geofence.h"
-#include "gaia/synth/synth.h"
 #include "gaia/text/vocab.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
@@ -447,12 +446,7 @@ TEST(WorldData, BatchToAndSliceSteps) {
 
 TEST(WorldData, TokenizeCopiesTheSourceSplit) {
   test::TempDir dir;
-  synth::SynthOptions o;
-  o.height = 32;
-  o.width = 64;
-  o.seconds = 0.4;
-  o.seed = 5;
-  for (int e = 0; e < 3; ++e) synth::write_episode(dir / "ds", o, e);
+  test::synth_dataset(dir / "ds", 3, 0.4);
   data::Dataset src(dir / "ds");
   data::Split split{{src.ids()[0], src.ids()[2]}, {src.ids()[1]}, {}};
   write_file_atomic(dir / "ds" / "split.json", split.to_json().dump());
