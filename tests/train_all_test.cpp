@@ -19,7 +19,7 @@ int count(const std::string& s, const std::string& what) {
 TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   test::TempDir d;
   const std::string cmd = "train-all --config " + q(test::source_dir() / "configs" / "tiny.yaml") +
-                          " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 3 --tokenizer-steps 6 --finetune-steps 3"
+                          " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 3 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"
                           " --world-steps 4 --decoder-steps 2 --probe-steps 3 --dynamics-probe-steps 3 --skip-eval" +
                           " --ship " + q(d / "models") + " --out " + q(d / "runs");
   auto r = test::run_gaia(cmd);
@@ -34,9 +34,11 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
     EXPECT_EQ(f32, 0) << f;
   }
   auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
-  ASSERT_EQ(log.size(), 10u + 5u);  // 10 training stages + 5 ship copies
-  EXPECT_NE(log[6]["command"].get<std::string>().find("world train"), std::string::npos);
-  EXPECT_NE(log[6]["command"].get<std::string>().find("--steps 4"), std::string::npos);
+  ASSERT_EQ(log.size(), 11u + 5u);  // 11 training stages + 5 ship copies
+  EXPECT_NE(log[5]["command"].get<std::string>().find("--decoder-only"), std::string::npos);  // tokenizer-refine
+  EXPECT_NE(log[6]["command"].get<std::string>().find("tokenizer-refine"), std::string::npos);  // tokens use its codes
+  EXPECT_NE(log[7]["command"].get<std::string>().find("world train"), std::string::npos);
+  EXPECT_NE(log[7]["command"].get<std::string>().find("--steps 4"), std::string::npos);
   // The procedural data: 3 lane-keeping episodes, 2 more whose driver wanders and 1 whose driver also swerves
   // (docs/synth.md).
   int keep = 0, wander = 0, swerve = 0;
@@ -50,7 +52,7 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   // Again: nothing left to do.
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 15) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 16) << r.output;
   // A bad config key fails before any stage starts, naming the key.
   r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);

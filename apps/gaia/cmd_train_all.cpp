@@ -43,7 +43,7 @@ void register_train_all(CLI::App& app) {
   // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
   // two resumed phases, which one run of each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 1000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
+    int tokenizer = 0, finetune = 15000, refine = 3500, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -60,6 +60,8 @@ void register_train_all(CLI::App& app) {
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
   cmd->add_option("--finetune-steps", st->finetune, "tokenizer fine-tune steps without the GAN term");
+  cmd->add_option("--refine-steps", st->refine,
+                  "tokenizer decoder-only steps with two refinement blocks added (0 = no such stage)");
   cmd->add_option("--world-steps", st->world, "world model steps");
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
@@ -77,7 +79,8 @@ void register_train_all(CLI::App& app) {
       a.insert(a.end(), common.begin(), common.end());
       return a;
     };
-    const std::string synth = (out / "synth").string(), tok = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
+    const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
+    const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
     const std::string tokens = (out / "tokens").string(), world = (out / "world" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
@@ -90,9 +93,9 @@ void register_train_all(CLI::App& app) {
          out / "tokenizer" / "tokenizer.safetensors"},
         {"tokenizer-ft",
          with({"tokenizer", "train", synth, "--init", (out / "tokenizer" / "tokenizer.safetensors").string(), "--steps",
-               std::to_string(st->finetune), "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=1e-4", "--set",
-               "tokenizer.warmup_steps=50", "--set", "tokenizer.final_lr=1e-5", "--out", (out / "tokenizer-ft").string()}),
-         tok},
+               std::to_string(st->finetune), "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
+               "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / "tokenizer-ft").string()}),
+         tok_ft},
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
          world},
@@ -110,6 +113,17 @@ void register_train_all(CLI::App& app) {
     // wandering and swerving. Each is its own resumable stage with its own episode indices.
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
     if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
+    // The decoder alone, encoder and codebook frozen, grown by two full-resolution blocks (MODEL_CARD.md): they start
+    // as identities and learn what the fine-tuned decoder still misses, and every frame keeps the codes of
+    // tokenizer-ft. (The config default stays 0 so that weights saved before refine_blocks existed load as saved.)
+    if (st->refine > 0)
+      stages.insert(stages.begin() + 3,
+                    {"tokenizer-refine",
+                     with({"tokenizer", "train", synth, "--init", tok_ft, "--decoder-only", "--steps", std::to_string(st->refine),
+                           "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
+                           "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out",
+                           (out / "tokenizer-refine").string()}),
+                     tok});
     std::vector<Stage> more_drives;
     auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
       if (n == 0) return;
