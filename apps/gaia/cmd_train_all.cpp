@@ -84,6 +84,14 @@ void register_train_all(CLI::App& app) {
     const std::string tokens = (out / "tokens").string(), world = (out / "world" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
+    // A tokenizer run from earlier weights without the GAN term (AdamW 2e-4, 100 warm-up steps, cosine to 1e-5).
+    auto no_gan_run = [&](const std::string& init, int steps, const std::string& dir, std::vector<std::string> extra) {
+      std::vector<std::string> a{"tokenizer", "train", synth, "--init", init, "--steps", std::to_string(steps)};
+      a.insert(a.end(), extra.begin(), extra.end());
+      a.insert(a.end(), {"--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
+                         "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / dir).string()});
+      return with(a);
+    };
     std::vector<Stage> stages = {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
@@ -91,10 +99,7 @@ void register_train_all(CLI::App& app) {
         {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
                             "--out", (out / "tokenizer").string()}),
          out / "tokenizer" / "tokenizer.safetensors"},
-        {"tokenizer-ft",
-         with({"tokenizer", "train", synth, "--init", (out / "tokenizer" / "tokenizer.safetensors").string(), "--steps",
-               std::to_string(st->finetune), "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
-               "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / "tokenizer-ft").string()}),
+        {"tokenizer-ft", no_gan_run((out / "tokenizer" / "tokenizer.safetensors").string(), st->finetune, "tokenizer-ft", {}),
          tok_ft},
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
@@ -119,10 +124,7 @@ void register_train_all(CLI::App& app) {
     if (st->refine > 0)
       stages.insert(stages.begin() + 3,
                     {"tokenizer-refine",
-                     with({"tokenizer", "train", synth, "--init", tok_ft, "--decoder-only", "--steps", std::to_string(st->refine),
-                           "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
-                           "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out",
-                           (out / "tokenizer-refine").string()}),
+                     no_gan_run(tok_ft, st->refine, "tokenizer-refine", {"--decoder-only", "--set", "tokenizer.refine_blocks=2"}),
                      tok});
     std::vector<Stage> more_drives;
     auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {

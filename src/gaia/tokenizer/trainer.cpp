@@ -66,7 +66,9 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   if (!opt.vgg.empty() && fs::exists(opt.vgg)) vgg = std::make_unique<Vgg16>(opt.vgg);
   else note(opt.vgg.empty() ? "no VGG16 teacher given (--vgg): perceptual loss off"
                             : "VGG16 teacher " + opt.vgg.string() + " not found: perceptual loss off");
-  if (!opt.dino.empty() && fs::exists(opt.dino)) dino = std::make_unique<DinoViT>(opt.dino);
+  if (opt.decoder_only) {
+    if (!opt.dino.empty()) note("--decoder-only: the codes are frozen, DINO distillation loss off (teacher not loaded)");
+  } else if (!opt.dino.empty() && fs::exists(opt.dino)) dino = std::make_unique<DinoViT>(opt.dino);
   else note(opt.dino.empty() ? "no DINO teacher given (--dino): DINO distillation loss off"
                              : "DINO teacher " + opt.dino.string() + " not found: DINO distillation loss off");
   if (vgg) (*vgg)->to(dev);
@@ -171,7 +173,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       loss = loss + tc.w_perceptual * lp;
       terms["perceptual"] = lp.item<double>();
     }
-    if (dino && !opt.decoder_only) {
+    if (dino) {
       torch::Tensor target;
       {
         torch::NoGradGuard ng;
