@@ -154,13 +154,14 @@ TEST(TokenizerTrain, InitFineTunesFromWeightsAndBalancesTheGanGradient) {
   EXPECT_NE(err.find("shape"), std::string::npos) << err;
 }
 
-TEST(TokenizerTrain, DecoderOnlyGrowsRefineBlocksAndKeepsEveryCode) {
+TEST(TokenizerTrain, DecoderOnlyGrowsRefineAndTokenBlocksAndKeepsEveryCode) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 0.4);
   train_two_steps(dir / "ds", dir / "base");
   auto base = tokenizer::load_tokenizer(dir / "base" / "tokenizer.safetensors", torch::kCPU);
   Config g = tiny();
   g.tokenizer.refine_blocks = 2;
+  g.tokenizer.token_blocks = 1;
   g.tokenizer.disc_start = 1000000;
   ASSERT_EQ(tokenizer::ImageTokenizer(g)->parameter_count(), plan::tokenizer_params(g).total);
   tokenizer::TrainOptions o;
@@ -179,7 +180,7 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineBlocksAndKeepsEveryCode) {
   auto base_codes = tokenizer::encode_frames(base, frames, torch::kCPU);
   auto base_rec = tokenizer::decode_tokens(base, base_codes, torch::kCPU);
 
-  // Grown with a zero learning rate: the refinement blocks start as identities, so every output is unchanged.
+  // Grown with a zero learning rate: the refinement and token blocks start as identities, so every output is unchanged.
   o.init = dir / "base" / "tokenizer.safetensors";
   Config z = g;
   z.tokenizer.lr = z.tokenizer.final_lr = 0;
@@ -189,6 +190,7 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineBlocksAndKeepsEveryCode) {
   Config loaded;
   auto grown = tokenizer::load_tokenizer(dir / "grown" / "tokenizer.safetensors", torch::kCPU, &loaded);
   EXPECT_EQ(loaded.tokenizer.refine_blocks, 2);  // the architecture travels in the weights' metadata
+  EXPECT_EQ(loaded.tokenizer.token_blocks, 1);
   auto grown_rec = tokenizer::decode_tokens(grown, base_codes, torch::kCPU);
   for (size_t i = 0; i < frames.size(); ++i) EXPECT_EQ(cv::norm(base_rec[i], grown_rec[i], cv::NORM_INF), 0) << i;
 
@@ -210,6 +212,8 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineBlocksAndKeepsEveryCode) {
     EXPECT_TRUE(torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)))) << n;
   }
   EXPECT_GT(moved, 10);
+  EXPECT_GT(tensor_from_view(b.get("decoder.token.0.conv2.weight")).abs().max().item<float>(), 0)
+      << "the token blocks train away from the identity";
   auto refined = tokenizer::load_tokenizer(dir / "refined" / "tokenizer.safetensors", torch::kCPU);
   EXPECT_TRUE(torch::equal(tokenizer::encode_frames(refined, frames, torch::kCPU), base_codes));
 }

@@ -80,6 +80,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("tokenizer.channel_mult", &t.channel_mult));
   f.push_back(field("tokenizer.res_blocks", &t.res_blocks));
   f.push_back(field("tokenizer.refine_blocks", &t.refine_blocks));
+  f.push_back(field("tokenizer.token_blocks", &t.token_blocks));
   f.push_back(field("tokenizer.z_channels", &t.z_channels));
   f.push_back(field("tokenizer.disc_channels", &t.disc_channels));
   f.push_back(field("tokenizer.disc_layers", &t.disc_layers));
@@ -226,8 +227,8 @@ void Config::validate() const {
   need(static_cast<int>(tokenizer.channel_mult.size()) == levels + 1,
        fmt::format("tokenizer.channel_mult needs log2(downsample) + 1 = {} entries", levels + 1));
   need(tokenizer.codebook_size >= 2, "tokenizer.codebook_size must be >= 2");
-  need(tokenizer.res_blocks >= 1 && tokenizer.refine_blocks >= 0,
-       "tokenizer.res_blocks must be >= 1 and tokenizer.refine_blocks >= 0");
+  need(tokenizer.res_blocks >= 1 && tokenizer.refine_blocks >= 0 && tokenizer.token_blocks >= 0,
+       "tokenizer.res_blocks must be >= 1 and tokenizer.refine_blocks, tokenizer.token_blocks >= 0");
   need(world.d_model % world.n_heads == 0, "world.d_model must be divisible by world.n_heads");
   need(world.action_tokens == 2, "world.action_tokens must be 2 (speed, curvature; paper §2.1)");
   // m >= 1: the first image token of a step is predicted from the last text token before it.

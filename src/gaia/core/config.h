@@ -34,6 +34,10 @@ struct TokenizerConfig {
   // at zero, so they can be added to trained weights without changing a single output, then trained with the
   // encoder frozen (`--decoder-only`): more reconstruction capacity where the error is, same codes.
   int refine_blocks = 0;
+  // Extra ResNet blocks at the token grid at the start of the decoder (not in the paper), zero-initialised like
+  // refine_blocks. At H/D x W/D they are cheap (1/D^2 of the pixels) and widen what each output pixel sees of the
+  // neighbouring codes, which is where a decoder of fixed codes still has error to remove.
+  int token_blocks = 0;
   int z_channels = 128;          // width at the bottleneck before the code projection
   int disc_channels = 32;        // PatchGAN discriminator width
   int disc_layers = 3;

@@ -48,7 +48,7 @@ ParamCount tokenizer_params(const Config& cfg) {
   int64_t codebook = int64_t(t.codebook_size) * t.code_dim;
   p += linear(t.z_channels, t.code_dim) + codebook + linear(t.code_dim, t.z_channels);
   // Decoder mirrors the encoder with res_blocks + 1 blocks per level and nearest-upsample + conv.
-  p += conv(t.z_channels, c, 3) + 2 * res_block(c, c);
+  p += conv(t.z_channels, c, 3) + (2 + t.token_blocks) * res_block(c, c);
   for (int i = L - 1; i >= 0; --i) {
     int64_t co = int64_t(t.channels) * t.channel_mult[static_cast<size_t>(i)];
     for (int r = 0; r < t.res_blocks + 1; ++r) { p += res_block(c, co); c = co; }

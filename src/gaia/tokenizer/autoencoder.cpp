@@ -26,10 +26,27 @@ torch::Tensor EncoderImpl::forward(torch::Tensor x) {
   return conv_out(F::silu(norm_out(body->forward(conv_in(x)))));
 }
 
+namespace {
+// n ResBlocks(c, c) whose last convolution starts at zero: each is the identity until it is trained, so a trained
+// decoder grown by them decodes exactly as before.
+torch::nn::Sequential identity_blocks(int n, int64_t c) {
+  torch::nn::Sequential s;
+  for (int r = 0; r < n; ++r) {
+    ResBlock b(c, c);
+    torch::NoGradGuard ng;
+    b->conv2->weight.zero_();
+    b->conv2->bias.zero_();
+    s->push_back(b);
+  }
+  return s;
+}
+}  // namespace
+
 DecoderImpl::DecoderImpl(const TokenizerConfig& t) {
   const int L = static_cast<int>(t.channel_mult.size());
   int64_t c = int64_t(t.channels) * t.channel_mult.back();
   conv_in = register_module("conv_in", torch::nn::Conv2d(torch::nn::Conv2dOptions(t.z_channels, c, 3).padding(1)));
+  if (t.token_blocks > 0) token = register_module("token", identity_blocks(t.token_blocks, c));
   body->push_back(ResBlock(c, c));
   body->push_back(ResBlock(c, c));
   for (int i = L - 1; i >= 0; --i) {
@@ -38,22 +55,15 @@ DecoderImpl::DecoderImpl(const TokenizerConfig& t) {
     if (i > 0) body->push_back(Upsample(c));
   }
   register_module("body", body);
-  if (t.refine_blocks > 0) {
-    refine = register_module("refine", torch::nn::Sequential());
-    for (int r = 0; r < t.refine_blocks; ++r) {
-      ResBlock b(c, c);
-      torch::NoGradGuard ng;
-      b->conv2->weight.zero_();  // identity at the start: growing a trained decoder keeps its outputs
-      b->conv2->bias.zero_();
-      refine->push_back(b);
-    }
-  }
+  if (t.refine_blocks > 0) refine = register_module("refine", identity_blocks(t.refine_blocks, c));
   norm_out = register_module("norm_out", group_norm(c));
   conv_out = register_module("conv_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(c, 3, 3).padding(1)));
 }
 
 torch::Tensor DecoderImpl::forward(torch::Tensor z) {
-  auto h = body->forward(conv_in(z));  // [B, channels * channel_mult[0], H, W]
+  auto h = conv_in(z);                // [B, channels * channel_mult.back(), H/D, W/D]
+  if (token) h = token->forward(h);
+  h = body->forward(h);               // [B, channels * channel_mult[0], H, W]
   if (refine) h = refine->forward(h);
   return conv_out(F::silu(norm_out(h)));
 }

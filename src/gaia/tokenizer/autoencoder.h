@@ -25,6 +25,7 @@ struct DecoderImpl : torch::nn::Module {
   torch::Tensor forward(torch::Tensor z);
   torch::nn::Conv2d conv_in{nullptr}, conv_out{nullptr};
   torch::nn::Sequential body;
+  torch::nn::Sequential token{nullptr};   // config token_blocks ResBlocks at the token grid, absent when 0
   torch::nn::Sequential refine{nullptr};  // config refine_blocks full-resolution ResBlocks, absent when 0
   torch::nn::GroupNorm norm_out{nullptr};
 };

@@ -105,9 +105,9 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     // Fine-tuning: weights from an earlier run, fresh optimiser and schedule. The architecture must match.
     Config init_cfg;
     auto init = load_tokenizer(opt.init, dev, &init_cfg, &cfg);
-    // the DINO head and any refinement blocks the --init weights lack start fresh (refinement blocks as identities)
+    // the DINO head and any refinement or token blocks the --init weights lack start fresh (the blocks as identities)
     train::init_from(*model, *init, opt.init, [](const std::string& k) {
-      return k.rfind("dino_head.", 0) == 0 || k.rfind("decoder.refine.", 0) == 0;
+      return k.rfind("dino_head.", 0) == 0 || k.rfind("decoder.refine.", 0) == 0 || k.rfind("decoder.token.", 0) == 0;
     });
     note("initialised from " + opt.init.string());
   }
