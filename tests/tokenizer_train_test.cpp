@@ -218,6 +218,56 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineAndTokenBlocksAndKeepsEveryCode) {
   EXPECT_TRUE(torch::equal(tokenizer::encode_frames(refined, frames, torch::kCPU), base_codes));
 }
 
+TEST(TokenizerTrain, EmaAveragesTheDecoderResumesExactlyAndKeepsTheCodes) {
+  test::TempDir dir;
+  make_dataset(dir / "ds", 2, 0.4);
+  train_two_steps(dir / "ds", dir / "base");
+  Config g = tiny();
+  g.tokenizer.disc_start = 1000000;
+  g.tokenizer.ema_decay = 0.9;
+  g.tokenizer.lr = g.tokenizer.final_lr = 2e-3;
+  tokenizer::TrainOptions o;
+  o.dataset = dir / "ds";
+  o.init = dir / "base" / "tokenizer.safetensors";
+  o.decoder_only = true;
+  o.val_every = 100;
+
+  // One step: the warm-up decay is min(0.9, 1/10), so the saved decoder is 0.1 x the initial weights + 0.9 x the
+  // trained ones (the checkpoint's model), and everything else is the trained model's.
+  o.steps = 1;
+  o.out = dir / "one";
+  tokenizer::train_tokenizer(g, o);
+  SafetensorsFile init(dir / "base" / "tokenizer.safetensors"), raw(dir / "one" / "checkpoint" / "tokenizer.safetensors"),
+      saved(dir / "one" / "tokenizer.safetensors");
+  int averaged = 0;
+  for (auto& n : saved.names()) {
+    auto s = tensor_from_view(saved.get(n)), r = tensor_from_view(raw.get(n));
+    if (n.rfind("decoder.", 0) == 0) {
+      auto expect = 0.1 * tensor_from_view(init.get(n)) + 0.9 * r;
+      EXPECT_TRUE(torch::allclose(s, expect, 1e-5, 1e-6)) << n;
+      averaged += !torch::equal(s, r);
+    } else {
+      EXPECT_TRUE(torch::equal(s, r)) << n;
+      EXPECT_TRUE(torch::equal(s, tensor_from_view(init.get(n)))) << n;  // decoder-only: the codes stay
+    }
+  }
+  EXPECT_GT(averaged, 10);
+
+  // Stopped and resumed, the average comes back from the checkpoint: the same weights as one straight run.
+  o.steps = 12;
+  o.out = dir / "straight";
+  tokenizer::train_tokenizer(g, o);
+  o.out = dir / "resumed";
+  o.stop_after = 7;
+  tokenizer::train_tokenizer(g, o);
+  o.stop_after = -1;
+  EXPECT_TRUE(tokenizer::train_tokenizer(g, o).resumed);
+  SafetensorsFile a(dir / "straight" / "tokenizer.safetensors"), b(dir / "resumed" / "tokenizer.safetensors");
+  ASSERT_EQ(a.names(), b.names());
+  for (auto& n : a.names())
+    EXPECT_TRUE(torch::allclose(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)), 1e-6, 1e-7)) << n;
+}
+
 TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 2.0);  // 50 frames at 25 Hz -> 13 steps at 6.25 Hz

@@ -101,6 +101,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("tokenizer.warmup_steps", &t.warmup_steps));
   f.push_back(field("tokenizer.steps", &t.steps));
   f.push_back(field("tokenizer.batch_size", &t.batch_size));
+  f.push_back(field("tokenizer.ema_decay", &t.ema_decay));
   auto& w = world;
   f.push_back(field("world.d_model", &w.d_model));
   f.push_back(field("world.n_layers", &w.n_layers));
@@ -227,6 +228,7 @@ void Config::validate() const {
   need(static_cast<int>(tokenizer.channel_mult.size()) == levels + 1,
        fmt::format("tokenizer.channel_mult needs log2(downsample) + 1 = {} entries", levels + 1));
   need(tokenizer.codebook_size >= 2, "tokenizer.codebook_size must be >= 2");
+  need(tokenizer.ema_decay >= 0 && tokenizer.ema_decay < 1, "tokenizer.ema_decay must be in [0, 1)");
   need(tokenizer.res_blocks >= 1 && tokenizer.refine_blocks >= 0 && tokenizer.token_blocks >= 0,
        "tokenizer.res_blocks must be >= 1 and tokenizer.refine_blocks, tokenizer.token_blocks >= 0");
   need(world.d_model % world.n_heads == 0, "world.d_model must be divisible by world.n_heads");

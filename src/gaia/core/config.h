@@ -52,6 +52,10 @@ struct TokenizerConfig {
   // steps). The CPU recipe trains 3k steps at batch 8, so it uses a 3x higher rate with the same shape.
   double lr = 3e-4, weight_decay = 0.01, beta1 = 0.5, beta2 = 0.9, final_lr = 3e-5;
   int warmup_steps = 100, steps = 3000, batch_size = 8;
+  // Exponential moving average of the decoder's weights (not in the paper; 0 = off). The saved tokenizer decodes
+  // with the average and encodes with the trained encoder and codebook, so the codes are those of training; at the
+  // end of a fine-tune the average is a better decoder of them than the last noisy step (batch 8 on a CPU).
+  double ema_decay = 0;
 };
 
 struct WorldConfig {

@@ -16,6 +16,7 @@
 #include "gaia/tokenizer/teachers.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
+#include "gaia/train/ema.h"
 #include "gaia/train/optim.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
@@ -79,6 +80,14 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   PatchDiscriminator disc(tc);
   model->to(dev);
   disc->to(dev);
+  // With tokenizer.ema_decay > 0, `averaged` holds the EMA of the decoder's weights; its other parts are copied from
+  // the trained model whenever it is used, so it encodes exactly as the model does.
+  ImageTokenizer averaged{nullptr};
+  if (tc.ema_decay > 0) {
+    averaged = ImageTokenizer(cfg, dino ? (*dino)->dim : 0);
+    averaged->to(dev);
+    averaged->eval();
+  }
   if (opt.decoder_only) {
     if (opt.init.empty() && !train::has_checkpoint(opt.out / "checkpoint"))
       fail("tokenizer train --decoder-only: needs --init weights (the frozen encoder and codebook to decode)");
@@ -93,9 +102,11 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   fs::path ckpt = opt.out / "checkpoint";
   int step = 0;
   std::vector<int64_t> usage(static_cast<size_t>(tc.codebook_size), 0);
+  std::vector<std::pair<std::string, torch::nn::Module*>> modules{{"tokenizer", model.ptr().get()},
+                                                                   {"discriminator", disc.ptr().get()}};
+  if (averaged) modules.emplace_back("ema", averaged.ptr().get());
   if (train::has_checkpoint(ckpt)) {
-    auto st = train::load_checkpoint(ckpt, {{"tokenizer", model.ptr().get()}, {"discriminator", disc.ptr().get()}},
-                                     {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}});
+    auto st = train::load_checkpoint(ckpt, modules, {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}});
     step = st.step;
     usage = st.extra.value("usage", usage);
     result.resumed = true;
@@ -111,19 +122,31 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     });
     note("initialised from " + opt.init.string());
   }
+  if (averaged && !result.resumed) train::ema_copy(*averaged, *model);
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
 
   auto save = [&]() {
     nlohmann::json extra = {{"usage", usage}, {"config", cfg.name}};
-    train::save_checkpoint(ckpt, {{"tokenizer", model.ptr().get()}, {"discriminator", disc.ptr().get()}},
-                           {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}}, {step, extra});
+    std::vector<std::pair<std::string, const torch::nn::Module*>> out(modules.begin(), modules.end());
+    train::save_checkpoint(ckpt, out, {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}}, {step, extra});
+  };
+
+  // The tokenizer that is validated and saved: the model, or its decoder average with the model's encoder, codebook
+  // and heads.
+  auto final_model = [&]() -> ImageTokenizer& {
+    if (!averaged) return model;
+    auto mine = averaged->named_children();
+    for (const auto& c : model->named_children())
+      if (c.key() != "decoder") train::ema_copy(*mine[c.key()], *c.value());
+    return averaged;
   };
 
   auto validate = [&]() {
     nlohmann::json v;
     if (!val) return v;
-    model->eval();
+    ImageTokenizer& m = final_model();
+    m->eval();
     std::mt19937_64 rng(cfg.run.seed + 12345);  // the same held-out frames every time
     auto picks = val->sample(static_cast<size_t>(opt.val_frames), rng);
     double p = 0, s = 0;
@@ -131,7 +154,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     {
       torch::NoGradGuard ng;
       auto x = batch_tensor(*val, picks, dev);
-      auto o = model->forward(x);
+      auto o = m->forward(x);
       auto idx = o.q.indices.reshape({-1}).to(torch::kCPU);
       auto acc = idx.accessor<int64_t, 1>();
       for (int64_t i = 0; i < idx.size(0); ++i) counts[static_cast<size_t>(acc[i])]++;
@@ -145,6 +168,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     }
     auto cs = eval::code_stats(counts);
     model->train();
+    if (averaged) averaged->eval();
     v = {{"psnr", p / double(picks.size())}, {"ssim", s / double(picks.size())}, {"usage", cs.usage},
          {"perplexity", cs.perplexity}};
     return v;
@@ -222,6 +246,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       auto acc = idx.accessor<int64_t, 1>();
       for (int64_t i = 0; i < idx.size(0); ++i) usage[static_cast<size_t>(acc[i])]++;
     }
+    if (averaged) train::ema_update(*averaged->decoder, *model->decoder, tc.ema_decay, step);
     ++step;
     if (opt.restart_every > 0 && !opt.decoder_only && step % opt.restart_every == 0 && step < total) {
       torch::NoGradGuard ng;
@@ -249,7 +274,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
-  if (step >= total) save_tokenizer(model, cfg, opt.out / "tokenizer.safetensors");
+  if (step >= total) save_tokenizer(final_model(), cfg, opt.out / "tokenizer.safetensors");
   return result;
 }
 
