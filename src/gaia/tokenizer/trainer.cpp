@@ -168,7 +168,6 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     }
     auto cs = eval::code_stats(counts);
     model->train();
-    if (averaged) averaged->eval();
     v = {{"psnr", p / double(picks.size())}, {"ssim", s / double(picks.size())}, {"usage", cs.usage},
          {"perplexity", cs.perplexity}};
     return v;
