@@ -362,6 +362,20 @@ TEST(DecoderEval, FlickerAndTemporalError) {
   EXPECT_THROW(temporal_error(x, x.slice(0, 1)), gaia::Error);
 }
 
+// The 25 Hz baseline from 6.25 Hz tokens: key frames kept, the frames between them on the straight line, so a
+// sequence that moves linearly in time is reproduced exactly.
+TEST(DecoderEval, BlendToRateKeepsKeyFramesAndInterpolatesLinearly) {
+  torch::manual_seed(12);
+  auto a = torch::rand({3, 4, 8}), b = torch::rand({3, 4, 8});
+  auto line = torch::stack({a, a + 4 * b, a + 8 * b});  // key frames of x(t) = a + t b at t = 0, 4, 8
+  auto up = blend_to_rate(line, 4);
+  ASSERT_EQ(up.size(0), 9);
+  for (int64_t t = 0; t < 9; ++t) EXPECT_TRUE(torch::allclose(up[t], a + double(t) * b, 1e-5, 1e-5)) << t;
+  EXPECT_TRUE(torch::equal(blend_to_rate(line, 1), line));
+  EXPECT_EQ(blend_to_rate(line.slice(0, 0, 1), 4).size(0), 1);
+  EXPECT_THROW(blend_to_rate(line, 0), gaia::Error);
+}
+
 // §5.2 mixing: with probability 1 every step averages in the image (temporal-off) prediction, but only on frames
 // with tokens. With one DDIM step the output is a function of that one v, so frames without tokens (interpolation)
 // must come out exactly as without mixing, and frames with tokens must not.
@@ -585,4 +599,46 @@ TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
   o.noise_correlation = 0.0;
   auto b = sample_window(m, sch, w, o);
   EXPECT_GT((b.select(1, 0) - b.select(1, 4)).abs().mean().item<double>(), 0.01);
+}
+
+// decoder.noise_scale: the temperature of the starting noise. With a fresh model (v ~ 0) DDIM is nearly linear in z_T,
+// so the residual over the coarse frame scales with the option; at 0 the sampler returns the coarse frame whatever
+// the seed.
+TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v ~ 0
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 8);
+  WindowInput w;
+  w.frames = torch::zeros_like(in.x);
+  w.context = torch::zeros({1, 5});
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  w.cond_image = (in.cond_image * 0.3).contiguous();
+  NoiseSchedule sch;
+  auto o = sample_options(c.decoder, 3, 11);
+  EXPECT_EQ(o.noise_scale, c.decoder.noise_scale);  // the config's
+  o.noise_scale = 1;
+  o.mix_probability = 0;
+  auto full = sample_window(m, sch, w, o);
+  o.noise_scale = 0.5;
+  auto half = sample_window(m, sch, w, o);
+  const auto base = w.cond_image.clamp(-1, 1);
+  auto inside = (full.abs() < 0.999).logical_and(half.abs() < 0.999);  // away from the clamp
+  ASSERT_GT(inside.sum().item<int64_t>(), 1000);
+  auto r_full = (full - base).masked_select(inside), r_half = (half - base).masked_select(inside);
+  EXPECT_GT(r_full.abs().mean().item<double>(), 0.05);
+  // The output layer of a fresh model is zero-initialised but the rest is not, so v is only near zero: the residual
+  // shrinks with the noise rather than exactly with it.
+  const double ratio = r_half.abs().mean().item<double>() / r_full.abs().mean().item<double>();
+  EXPECT_NEAR(ratio, 0.5, 0.05);
+  EXPECT_GT(torch::cosine_similarity(r_half, r_full, 0).item<double>(), 0.95);
+  o.noise_scale = 0;
+  auto zero = sample_window(m, sch, w, o);
+  o.seed = 12;
+  EXPECT_TRUE(torch::allclose(zero, sample_window(m, sch, w, o)));
+  EXPECT_LT((zero - base).abs().max().item<double>(), 1e-6);
+  o.noise_scale = 1.5;
+  EXPECT_NE(test::error_of([&] { sample_window(m, sch, w, o); }).find("decoder.noise_scale"), std::string::npos);
+  c.decoder.noise_scale = -0.1;
+  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_scale"), std::string::npos);
 }

@@ -235,6 +235,16 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   for (const char* s : {"Action control", "Text control", "Multiple futures", "Long rollout", "data:image/gif;base64,"})
     EXPECT_NE(html.find(s), std::string::npos) << s;
 
+  EXPECT_EQ(j["temperature"].get<double>(), 1.0);  // the world model's config
+
+  // --set world.temperature reaches the sampler: the same long rollout, sharper distributions, other tokens.
+  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --out " +
+                     q(p.dir / "eval-cold"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto cold = nlohmann::json::parse(read_file(p.dir / "eval-cold" / "eval.json"));
+  EXPECT_EQ(cold["temperature"].get<double>(), 0.3);
+  EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
+
   // Bad inputs: one clear line, non-zero exit, nothing written.
   r = test::run_gaia(base + " --only action,bogus --out " + q(p.dir / "bad"));
   EXPECT_NE(r.status, 0);

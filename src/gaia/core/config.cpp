@@ -145,6 +145,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("decoder.mix_probability", &v.mix_probability));
   f.push_back(field("decoder.mix_weight", &v.mix_weight));
   f.push_back(field("decoder.noise_correlation", &v.noise_correlation));
+  f.push_back(field("decoder.noise_scale", &v.noise_scale));
   f.push_back(field("decoder.w_l1", &v.w_l1));
   f.push_back(field("decoder.w_l2", &v.w_l2));
   f.push_back(field("decoder.ema_decay", &v.ema_decay));
@@ -249,6 +250,7 @@ void Config::validate() const {
        "data.height and data.width must be divisible by 2^(len(decoder.channel_mult) - 1)");
   need(decoder.schedule_shift > 0, "decoder.schedule_shift must be positive");
   need(decoder.noise_correlation >= 0 && decoder.noise_correlation <= 1, "decoder.noise_correlation must be in [0, 1]");
+  need(decoder.noise_scale >= 0 && decoder.noise_scale <= 1, "decoder.noise_scale must be in [0, 1]");
 }
 
 std::string Config::to_yaml() {

@@ -22,6 +22,10 @@ double temporal_change(const torch::Tensor& frames);
 // however much its errors jump from frame to frame; this one counts those jumps, and is 0 only when every change
 // is the true one.
 double temporal_error(const torch::Tensor& frames, const torch::Tensor& truth);
+// Frames at `factor` times the rate of `key` [N, ...] by linear blending of neighbouring key frames -> [(N - 1) factor
+// + 1, ...]; the key frames are kept. A frame-by-frame decoder that gets tokens only at the token rate (6.25 Hz)
+// reaches 25 Hz this way: the baseline the video decoder's upsampling must beat.
+torch::Tensor blend_to_rate(const torch::Tensor& key, int factor);
 // PSNR between images in [-1, 1] (the first is clamped), on the [0, 1] scale.
 double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b);
 

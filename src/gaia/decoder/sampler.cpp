@@ -41,6 +41,7 @@ SampleOptions sample_options(const DecoderConfig& cfg, int steps, uint64_t seed)
   o.mix_probability = cfg.mix_probability;
   o.mix_weight = cfg.mix_weight;
   o.noise_correlation = cfg.noise_correlation;
+  o.noise_scale = cfg.noise_scale;
   o.seed = seed;
   return o;
 }
@@ -58,7 +59,8 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   const auto x0 = in.frames - base;
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
-  auto z = starting_noise(x0.sizes(), o.noise_correlation, gen).to(x0.options());
+  if (!(o.noise_scale >= 0 && o.noise_scale <= 1)) fail("decoder.noise_scale must be in [0, 1], got {}", o.noise_scale);
+  auto z = (o.noise_scale * starting_noise(x0.sizes(), o.noise_correlation, gen)).to(x0.options());
   std::mt19937_64 rng(o.seed ^ 0x9e3779b97f4a7c15ULL);
   std::bernoulli_distribution mix(o.mix_probability);
   DenoiserInput di;

@@ -28,6 +28,11 @@ struct SampleOptions {
   // the tokens leave open is drawn alike in neighbouring frames instead of independently (cf. the correlated noise
   // prior of Ge et al. 2023, used here at sampling time only). 0 = independent noise, as in training.
   double noise_correlation = 0.0;
+  // Temperature of the starting noise: z_T = s n. Below 1, DDIM lands nearer the model's mean residual over the
+  // coarse frame instead of a full draw of the detail the tokens leave open: a draw's error is that of the mean
+  // plus the draw's own spread, and the spread is drawn anew in every frame (flicker). 1 = the paper's sampler,
+  // 0 = the deterministic path from z_T = 0. Sampling only; training is unchanged.
+  double noise_scale = 1.0;
   uint64_t seed = 0;
 };
 
