@@ -576,6 +576,15 @@ TEST(DecoderSampler, StartingNoiseCorrelatesTheFramesOfAWindow) {
   EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_correlation"), std::string::npos);
 }
 
+// A window in which every frame of `in` is generated from its tokens (no context); the caller sets the coarse frames.
+static WindowInput all_frames_generated(const VideoUNet& m, const DenoiserInput& in) {
+  WindowInput w;
+  w.frames = torch::zeros_like(in.x);
+  w.context = torch::zeros({in.x.size(0), in.x.size(1)});
+  w.tokens = in.tokens.clamp_max(m->K - 1);
+  return w;
+}
+
 // The sampler draws its starting noise with the option: a fresh model (v = 0) maps each frame's noise to its output,
 // so with r = 1 frames with the same coarse image come out equal, and with r = 0 they do not.
 TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
@@ -583,10 +592,7 @@ TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v = 0
   torch::NoGradGuard ng;
   auto in = random_input(m, 1, 5, 32, 64, 8);
-  WindowInput w;
-  w.frames = torch::zeros_like(in.x);
-  w.context = torch::zeros({1, 5});
-  w.tokens = in.tokens.clamp_max(m->K - 1);
+  auto w = all_frames_generated(m, in);
   w.cond_image = (in.cond_image.select(1, 0).unsqueeze(1) * 0.3).expand_as(in.x).contiguous();
   NoiseSchedule sch;
   auto o = sample_options(c.decoder, 3, 11);
@@ -609,10 +615,7 @@ TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v ~ 0
   torch::NoGradGuard ng;
   auto in = random_input(m, 1, 5, 32, 64, 8);
-  WindowInput w;
-  w.frames = torch::zeros_like(in.x);
-  w.context = torch::zeros({1, 5});
-  w.tokens = in.tokens.clamp_max(m->K - 1);
+  auto w = all_frames_generated(m, in);
   w.cond_image = (in.cond_image * 0.3).contiguous();
   NoiseSchedule sch;
   auto o = sample_options(c.decoder, 3, 11);
