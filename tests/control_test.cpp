@@ -6,7 +6,9 @@
 #include <array>
 #include <cstdio>
 
+#include "gaia/control/common.h"
 #include "gaia/control/rollouts.h"
+#include "gaia/probe/trainer.h"
 #include "gaia/eval/svg_plot.h"
 #include "test_util.h"
 
@@ -38,4 +40,30 @@ TEST(SvgPlot, BarsHangBelowZeroForNegativeValues) {
   EXPECT_NEAR(rects[0][1], rects[1][1], 1e-6);
   EXPECT_GT(rects[0][1], 10.0);
   EXPECT_NEAR(rects[0][0] + rects[0][1], rects[1][0], 0.11);  // the positive bar ends where the negative one starts
+}
+
+// The dynamics read-back slides the probe's K-frame window over a sequence one step at a time: S frames give
+// S - K + 1 readings, each the probe on exactly its window (speed and curvature in m/s and 1/m); too short a
+// sequence is one clear error that names the probe's window.
+TEST(ControlReadback, DynamicsWindowsSlideOverTheSequence) {
+  torch::manual_seed(3);
+  control::Models m;
+  m.dynamics = probe::ProbeNet(probe::ProbeKind::kDynamics, 3);
+  m.dynamics->eval();
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 5; ++i) {
+    cv::Mat f(16, 32, CV_8UC3);
+    cv::randu(f, cv::Scalar::all(0), cv::Scalar::all(255));
+    frames.push_back(f);
+  }
+  auto y = control::read_dynamics(m, frames);
+  ASSERT_EQ(y.sizes(), (std::vector<int64_t>{3, 2}));
+  torch::NoGradGuard ng;
+  for (int64_t k = 0; k < 3; ++k) {
+    auto want = m.dynamics->forward(probe::probe_input({frames[size_t(k)], frames[size_t(k) + 1], frames[size_t(k) + 2]}).unsqueeze(0))[0];
+    EXPECT_NEAR(y[k][0].item<double>(), want[0].item<double>() * world::kSpeedScale, 1e-4);
+    EXPECT_NEAR(y[k][1].item<double>(), want[1].item<double>() * world::kCurvatureScale, 1e-7);
+  }
+  auto err = test::error_of([&] { control::read_dynamics(m, {frames[0], frames[1]}); });
+  EXPECT_NE(err.find("reads 3 consecutive frames"), std::string::npos) << err;
 }

@@ -30,13 +30,15 @@ fs::path fresh_synth(const test::TempDir& d, const std::string& extra, const std
   return d / "ds";
 }
 
-// A shipped probe's scores on a dataset (stride: frames between the two frames of a dynamics example, 0 for scene).
-nlohmann::json probe_scores(const std::string& weights, const fs::path& ds_dir, int stride, int examples) {
+// A shipped probe's scores on a dataset (the frames each example reads come from the probe file and the default
+// config: one world-model step apart).
+nlohmann::json probe_scores(const std::string& weights, const fs::path& ds_dir, int examples) {
   data::Dataset ds(ds_dir);
   auto net = probe::load_probe(model(weights), torch::kCPU);
-  auto set = data::frame_set(ds, ds.ids(), stride, examples);
-  return probe::score(net->kind, probe::predict(net, set, stride, torch::kCPU),
-                      probe::targets(net->kind, set.episodes, set.frames, stride));
+  const probe::Span span = probe::span_of(net, Config{});
+  auto set = data::frame_set(ds, ds.ids(), span.reach(), examples);
+  return probe::score(net->kind, probe::predict(net, set, span, torch::kCPU),
+                      probe::targets(net->kind, set.episodes, set.frames, span));
 }
 
 }  // namespace
@@ -45,7 +47,7 @@ TEST(ShippedModels, SceneProbeReadsWeatherAndTimeOfDay) {
   if (!fs::exists(model("probe-scene.safetensors"))) GTEST_SKIP() << "models/probe-scene.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, "", {{"clear", "day"}, {"rain", "night"}, {"fog", "dusk"}, {"snow", "day"}, {"overcast", "dusk"}});
-  auto s = probe_scores("probe-scene.safetensors", ds_dir, 0, 200);
+  auto s = probe_scores("probe-scene.safetensors", ds_dir, 200);
   EXPECT_GE(s["time_of_day_accuracy"].get<double>(), 0.9) << s.dump();
   EXPECT_GE(s["weather_accuracy"].get<double>(), 0.7) << s.dump();
 }
@@ -54,7 +56,7 @@ TEST(ShippedModels, DynamicsProbeReadsSteeringAndSpeed) {
   if (!fs::exists(model("probe-dynamics.safetensors"))) GTEST_SKIP() << "models/probe-dynamics.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, " --scene bend", {{"clear", "day"}, {"overcast", "day"}, {"clear", "dusk"}});
-  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 4, 200);
+  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 200);
   EXPECT_GE(s["speed_spearman"].get<double>(), 0.6) << s.dump();
   EXPECT_GE(s["steering_sign_accuracy"].get<double>(), 0.8) << s.dump();
 }
@@ -66,7 +68,7 @@ TEST(ShippedModels, DynamicsProbeReadsWanderingSteering) {
   if (!fs::exists(model("probe-dynamics.safetensors"))) GTEST_SKIP() << "models/probe-dynamics.safetensors not shipped";
   test::TempDir d;
   auto ds_dir = fresh_synth(d, " --wander 1.2", {{"clear", "day"}, {"overcast", "dusk"}, {"rain", "day"}});
-  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 4, 300);
+  auto s = probe_scores("probe-dynamics.safetensors", ds_dir, 300);
   std::cout << s.dump() << "\n";
   EXPECT_GE(s["curvature_spearman"].get<double>(), 0.6) << s.dump();
   EXPECT_GE(s["steering_sign_accuracy"].get<double>(), 0.8) << s.dump();

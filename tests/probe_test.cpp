@@ -4,6 +4,8 @@
 #include <torch/torch.h>
 
 #include "gaia/core/safetensors.h"
+#include "gaia/data/frame_set.h"
+#include "gaia/world/batch.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/probe.h"
 #include "gaia/probe/trainer.h"
@@ -40,11 +42,23 @@ TEST(Probe, SpearmanRanks) {
 
 TEST(Probe, ShapesAndBadInputs) {
   probe::ProbeNet dyn(probe::ProbeKind::kDynamics), scene(probe::ProbeKind::kScene);
-  EXPECT_EQ(dyn->forward(torch::zeros({3, 6, 72, 128})).sizes(), (std::vector<int64_t>{3, 2}));
+  EXPECT_EQ(dyn->frames, probe::kDynamicsFrames);
+  EXPECT_EQ(dyn->forward(torch::zeros({3, 3 * probe::kDynamicsFrames, 72, 128})).sizes(), (std::vector<int64_t>{3, 2}));
   EXPECT_EQ(scene->forward(torch::zeros({2, 3, 72, 128})).sizes(), (std::vector<int64_t>{2, probe::kSceneLogits}));
   EXPECT_EQ(scene->features(torch::zeros({2, 3, 32, 64})).sizes(), (std::vector<int64_t>{2, 128}));
-  EXPECT_NE(test::error_of([&] { dyn->forward(torch::zeros({1, 3, 72, 128})); }).find("dynamics probe"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { dyn->forward(torch::zeros({1, 6, 72, 128})); }).find("dynamics probe"), std::string::npos);
   EXPECT_NE(test::error_of([] { probe::parse_kind("speed"); }).find("'speed'"), std::string::npos);
+  // A dynamics probe over K = 4 frames reads 12 channels; the scene probe reads one frame, dynamics at least two.
+  probe::ProbeNet dyn4(probe::ProbeKind::kDynamics, 4);
+  EXPECT_EQ(dyn4->forward(torch::zeros({2, 12, 32, 64})).sizes(), (std::vector<int64_t>{2, 2}));
+  EXPECT_NE(test::error_of([&] { dyn4->forward(torch::zeros({2, 6, 32, 64})); }).find("(4 frames)"), std::string::npos);
+  EXPECT_NE(test::error_of([] { probe::ProbeNet(probe::ProbeKind::kScene, 2); }).find("scene probe"), std::string::npos);
+  EXPECT_NE(test::error_of([] { probe::ProbeNet(probe::ProbeKind::kDynamics, 1); }).find("at least 2"), std::string::npos);
+  const auto span = probe::span_of(dyn4, Config{});  // one world-model step = 4 native frames at 25 / 6.25 Hz
+  EXPECT_EQ(span.frames, 4);
+  EXPECT_EQ(span.stride, 4);
+  EXPECT_EQ(span.reach(), 12);
+  EXPECT_EQ(probe::span_of(scene, Config{}).reach(), 0);
   // Scores: a perfect scene prediction is 100% on every attribute.
   auto y = torch::tensor({{2, 1, 3, 1}, {0, 0, 0, 0}}, torch::kLong);
   auto logits = torch::zeros({2, probe::kSceneLogits});
@@ -54,6 +68,25 @@ TEST(Probe, ShapesAndBadInputs) {
   auto s = probe::score(probe::ProbeKind::kScene, logits, y);
   EXPECT_DOUBLE_EQ(s["weather_accuracy"].get<double>(), 1.0);
   EXPECT_DOUBLE_EQ(s["lead_close_accuracy"].get<double>(), 1.0);
+}
+
+// Weights files say how many frames a dynamics probe reads; files from before that was recorded are pair probes,
+// and a frame count that is not a number is one clear error naming the file.
+TEST(Probe, FrameCountComesFromTheWeightsFile) {
+  test::TempDir d;
+  probe::ProbeNet pair(probe::ProbeKind::kDynamics, 2), six(probe::ProbeKind::kDynamics, 6);
+  save_module(*pair, d / "legacy.safetensors", {{"gaia.component", "probe"}, {"gaia.probe.kind", "dynamics"}});
+  save_module(*six, d / "six.safetensors",
+              {{"gaia.component", "probe"}, {"gaia.probe.kind", "dynamics"}, {"gaia.probe.frames", "6"}});
+  save_module(*six, d / "bad.safetensors",
+              {{"gaia.component", "probe"}, {"gaia.probe.kind", "dynamics"}, {"gaia.probe.frames", "six"}});
+  EXPECT_EQ(probe::load_probe(d / "legacy.safetensors", torch::kCPU)->frames, 2);
+  auto loaded = probe::load_probe(d / "six.safetensors", torch::kCPU);
+  EXPECT_EQ(loaded->frames, 6);
+  EXPECT_TRUE(torch::equal(loaded->body->parameters()[0], six->body->parameters()[0]));  // [32, 18, 3, 3]
+  auto err = test::error_of([&] { probe::load_probe(d / "bad.safetensors", torch::kCPU); });
+  EXPECT_NE(err.find("bad.safetensors"), std::string::npos) << err;
+  EXPECT_NE(err.find("gaia.probe.frames"), std::string::npos) << err;
 }
 
 TEST(ProbeCli, LearnsAndResumesExactly) {
@@ -85,6 +118,37 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
     ASSERT_EQ(r.status, 0) << r.output;
     EXPECT_NE(r.output.find(kind == "scene" ? "weather_accuracy" : "steering_sign_accuracy"), std::string::npos) << r.output;
   }
+  // A dynamics probe over 3 frames: its inputs are the frames i, i + s, i + 2 s and its targets the mean speed and
+  // curvature over the native frames i .. i + 2 s; the file says how many frames it reads, and eval reads them.
+  {
+    data::Dataset ds(d / "ds");
+    auto set = data::frame_set(ds, ds.ids(), 8, 6);
+    const probe::Span span{3, 4};
+    auto x = probe::inputs(set.episodes, set.frames, span);
+    auto y = probe::targets(probe::ProbeKind::kDynamics, set.episodes, set.frames, span);
+    ASSERT_EQ(x.sizes(), (std::vector<int64_t>{6, 9, 32, 64}));
+    for (size_t i = 0; i < set.frames.size(); ++i) {
+      const auto& e = set.frames[i];
+      const auto& ep = *set.episodes[e.episode];
+      EXPECT_TRUE(torch::equal(x[int64_t(i)].slice(0, 6, 9), probe::probe_input({ep.frame_bgr(e.frame + 8)})));
+      double sp = 0, cu = 0;
+      for (int64_t k = e.frame; k <= e.frame + 8; ++k) sp += ep.speed(k) / 9, cu += ep.curvature(k) / 9;
+      EXPECT_NEAR(y[int64_t(i)][0].item<double>(), sp / world::kSpeedScale, 1e-5);
+      EXPECT_NEAR(y[int64_t(i)][1].item<double>(), cu / world::kCurvatureScale, 1e-4);
+    }
+  }
+  r = test::run_gaia("probe train dynamics " + q(d / "ds") + tiny + " --frames 3 --steps 4 --batch 4 --out " + q(d / "dyn3"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(SafetensorsFile(d / "dyn3" / "probe-dynamics.safetensors").metadata().at("gaia.probe.frames"), "3");
+  EXPECT_EQ(probe::load_probe(d / "dyn3" / "probe-dynamics.safetensors", torch::kCPU)->frames, 3);
+  r = test::run_gaia("probe eval " + q(d / "dyn3" / "probe-dynamics.safetensors") + " " + q(d / "ds") + tiny + " --examples 8");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("\"frames\": 3"), std::string::npos) << r.output;
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --frames 2 --steps 4 --out " + q(d / "scene2"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("scene probe: reads one frame"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "scene2" / "probe-scene.safetensors"));
+
   r = test::run_gaia("probe eval " + q(d / "ds" / "dataset.json") + " " + q(d / "ds") + tiny);
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("dataset.json"), std::string::npos) << r.output;

@@ -7,6 +7,7 @@
 
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/probe/trainer.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
 #include "test_util.h"
@@ -196,7 +197,9 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
                            q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " +
                            q(models / "probe-dynamics.safetensors") + " --scene-probe " +
                            q(models / "probe-scene.safetensors") + p.tiny();
-  auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames 2 --futures 2" +
+  const int64_t K = probe::load_probe(models / "probe-dynamics.safetensors", torch::kCPU)->frames;
+  auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames " +
+                          std::to_string(K - 1) + " --futures 2" +
                           " --text-frames 1 --scales 0,2 --long-seconds 2 --window-seconds 1 --action-guidance 1.5 --out " +
                           q(p.dir / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
@@ -204,6 +207,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   const auto& a = j["action_control"];
   EXPECT_EQ(a["rollouts"].get<int>(), 2 * 8);  // prompts x commands
   EXPECT_EQ(a["guidance_scale"].get<double>(), 1.5);
+  EXPECT_EQ(a["probe_frames"].get<int64_t>(), K);  // the read-back windows span the last prompt frame and all generated
   for (const char* k : {"conditioned", "without_actions", "counterfactual_probe"})
     EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
   EXPECT_GT(a["counterfactual"]["psnr_db"].get<double>(), 5.0);
@@ -246,6 +250,11 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
 
   // Bad inputs: one clear line, non-zero exit, nothing written.
+  if (K > 2) {  // rollouts shorter than the dynamics probe's window cannot be read back
+    r = test::run_gaia(base + " --only action --frames " + std::to_string(K - 2) + " --out " + q(p.dir / "bad"));
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.output.find("--frames must be at least " + std::to_string(K - 1)), std::string::npos) << r.output;
+  }
   r = test::run_gaia(base + " --only action,bogus --out " + q(p.dir / "bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--only: unknown part 'bogus'"), std::string::npos) << r.output;

@@ -4,6 +4,7 @@
 // decoder, the rest through the tokenizer's decoder) and gathered into one HTML report. --from-scratch first runs
 // the whole training recipe (`gaia train-all`) and uses what it made.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include <opencv2/imgproc.hpp>
@@ -239,7 +240,8 @@ void register_demo(CLI::App& app) {
     video("videos/unconditional.gif", control::tile(Rows{f3[0]}, {"unconditional"}), show);
 
     // Probe read-back of what the demo asked for (one rollout each: an illustration; `gaia eval` measures).
-    auto read_curv = [&](const std::vector<cv::Mat>& f) {
+    auto read_curv = [&](const std::vector<cv::Mat>& f) {  // NaN (null in the JSON) when too short for the probe
+      if (int64_t(f.size()) - (P - 1) < m.dynamics->frames) return std::nan("");
       return control::read_dynamics(m, std::vector<cv::Mat>(f.begin() + P - 1, f.end())).select(1, 1).mean().item<double>();
     };
     nlohmann::json readback = {{"steer_left_curvature_per_km", 1000 * read_curv(fsteer[0])},

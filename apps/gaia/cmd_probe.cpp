@@ -1,5 +1,5 @@
-// gaia probe train|eval: the evaluation probes (dynamics: speed and curvature from two frames; scene: weather, time
-// of day, light state, lead vehicle close) on procedural-world data with ground-truth labels.
+// gaia probe train|eval: the evaluation probes (dynamics: speed and curvature from K >= 2 frames one world-model
+// step apart; scene: weather, time of day, light state, lead vehicle close) on procedural-world data with ground-truth labels.
 #include <cstdio>
 
 #include "common.h"
@@ -23,6 +23,9 @@ void register_probe(CLI::App& app) {
     cmd->add_option("DATASET", *dataset, "episode dataset with labels (gaia synth)")->required();
     cmd->add_option("--steps", o->steps, "training steps");
     cmd->add_option("--batch", o->batch, "examples per step");
+    cmd->add_option("--frames", o->frames,
+                    "dynamics: frames one example reads, one world-model step apart (default 4: gentle steering barely "
+                    "shows in 2; `gaia eval` then needs at least 3 generated frames)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
@@ -35,6 +38,7 @@ void register_probe(CLI::App& app) {
       opt.dataset = *dataset;
       opt.out = flags->out;
       if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch must be >= 1");
+      if (opt.frames < 0) fail("gaia probe train: --frames must be >= 1, got {}", opt.frames);
       std::unique_ptr<ProgressBar> bar;
       auto r = probe::train_probe(
           c, opt,
@@ -63,10 +67,11 @@ void register_probe(CLI::App& app) {
       auto dev = parse_device(c.run.device);
       auto net = probe::load_probe(*weights, dev);
       data::Dataset ds(*dataset);
-      const int stride = net->kind == probe::ProbeKind::kDynamics ? probe::dynamics_stride(c) : 0;
-      auto set = data::held_out_frames(ds, c.run.seed, stride, std::max(1, *n));
-      auto j = probe::score(net->kind, probe::predict(net, set, stride, dev),
-                            probe::targets(net->kind, set.episodes, set.frames, stride));
+      const probe::Span span = probe::span_of(net, c);
+      auto set = data::held_out_frames(ds, c.run.seed, span.reach(), std::max(1, *n));
+      auto j = probe::score(net->kind, probe::predict(net, set, span, dev),
+                            probe::targets(net->kind, set.episodes, set.frames, span));
+      j["frames"] = net->frames;
       if (!flags->out.empty()) {
         fs::create_directories(flags->out);
         write_file_atomic(fs::path(flags->out) / "probe_eval.json", j.dump(2) + "\n");

@@ -44,7 +44,7 @@ void register_train_all(CLI::App& app) {
   // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
   // each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 2000;
+    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");

@@ -24,7 +24,7 @@ constexpr double kSteerThreshold = 0.002;  // 1/m: below this a command or read-
 
 struct Readback {
   std::vector<double> speed, curvature;  // per rollout, mean over its generated frames
-  std::vector<double> pair_cmd, pair_read;  // per frame pair (curvature)
+  std::vector<double> pair_cmd, pair_read;  // per read-back window of the probe (a frame pair for K = 2): curvature
 };
 
 Readback read_rows(Models& m, const std::vector<std::vector<cv::Mat>>& frames, int64_t from) {
@@ -75,6 +75,9 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
                               const ActionEvalOptions& o, Output& out) {
   const int64_t P = o.prompt_frames, F = o.frames;
   if (P < 1 || F < 1) fail("action control needs at least one prompt frame and one generated frame");
+  if (F + 1 < m.dynamics->frames)  // the read-back starts at the last prompt frame
+    fail("action control: the dynamics probe reads {} consecutive frames, so --frames must be at least {} (got {})",
+         m.dynamics->frames, m.dynamics->frames - 1, F);
   const auto cmds = action_commands();
   const int64_t C = int64_t(cmds.size()), R = int64_t(o.prompts) * C;
   auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed);
@@ -135,10 +138,19 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   j["conditioned_in_distribution"] = agreement(cmd_speed, cmd_curv, rw, in_dist);
   j["conditioned_out_of_distribution"] = agreement(cmd_speed, cmd_curv, rw, ood);
   j["without_actions"] = agreement(cmd_speed, cmd_curv, rn, all);
+  // Per window of the probe's K frames (K - 1 steps): the mean of the curvatures commanded over its steps.
   std::vector<double> pair_cmd;
-  for (int64_t r = 0; r < R; ++r)
-    for (auto& a : per_frame[size_t(r)]) pair_cmd.push_back(a.curvature);
-  j["conditioned"]["steering_sign_accuracy_per_frame"] = sign_accuracy(pair_cmd, rw.pair_read);
+  const size_t steps = size_t(m.dynamics->frames - 1);
+  for (int64_t r = 0; r < R; ++r) {
+    const auto& a = per_frame[size_t(r)];
+    for (size_t w = 0; w + steps <= a.size(); ++w) {
+      double c = 0;
+      for (size_t k = w; k < w + steps; ++k) c += a[k].curvature / double(steps);
+      pair_cmd.push_back(c);
+    }
+  }
+  j["conditioned"]["steering_sign_accuracy_per_frame"] = sign_accuracy(pair_cmd, rw.pair_read);  // per probe window
+  j["probe_frames"] = m.dynamics->frames;
 
   // Counterfactual replay of the procedural world under the same commands: ground truth for every rollout.
   std::vector<std::vector<cv::Mat>> truth(static_cast<size_t>(R));
@@ -241,9 +253,9 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   out.sections.push_back(
       {{"title", "Action control"},
        {"text", fmt::format("{} held-out prompts x {} commands ({} prompt frames, {} generated at {} Hz). The dynamics "
-                            "probe reads the ego's speed and curvature back from consecutive decoded frames. "
-                            "strong-left / strong-right / drift-right are outside the recorded driving.",
-                            o.prompts, C, P, F, fps)},
+                            "probe reads the ego's speed and curvature back from each window of {} consecutive decoded "
+                            "frames. strong-left / strong-right / drift-right are outside the recorded driving.",
+                            o.prompts, C, P, F, fps, m.dynamics->frames)},
        {"videos", videos},
        {"plots", {{{"caption", "commanded vs read-back curvature"}, {"path", "plots/action_curvature.svg"}}}},
        {"metrics", j}});

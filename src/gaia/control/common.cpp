@@ -91,9 +91,12 @@ torch::Tensor run_probe(probe::ProbeNet& net, const std::vector<torch::Tensor>& 
 }  // namespace
 
 torch::Tensor read_dynamics(Models& m, const std::vector<cv::Mat>& frames) {
-  if (frames.size() < 2) fail("dynamics read-back needs at least two frames");
+  const size_t K = size_t(m.dynamics->frames);
+  if (frames.size() < K)
+    fail("dynamics read-back: the probe reads {} consecutive frames, the sequence has {}", K, frames.size());
   std::vector<torch::Tensor> in;
-  for (size_t k = 0; k + 1 < frames.size(); ++k) in.push_back(probe::probe_input({frames[k], frames[k + 1]}));
+  for (size_t k = 0; k + K <= frames.size(); ++k)
+    in.push_back(probe::probe_input(std::vector<cv::Mat>(frames.begin() + long(k), frames.begin() + long(k + K))));
   auto y = run_probe(m.dynamics, in, m.dev, nullptr);
   y.select(1, 0).mul_(world::kSpeedScale);
   y.select(1, 1).mul_(world::kCurvatureScale);

@@ -45,7 +45,8 @@ Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frame
 // Token rollouts [N, S, n] -> N sequences of S BGR frames through the tokenizer's decoder.
 std::vector<std::vector<cv::Mat>> decode(Models& m, const torch::Tensor& tokens);
 
-// Dynamics probe on consecutive frames (one world step apart) -> [S - 1, 2]: speed (m/s), curvature (1/m).
+// Dynamics probe on each window of K consecutive frames (one world step apart; K = the probe's frames, 2 for the
+// pair probe) -> [S - K + 1, 2]: speed (m/s), curvature (1/m), each the mean over its window's steps.
 torch::Tensor read_dynamics(Models& m, const std::vector<cv::Mat>& frames);
 // Scene probe -> class ids [S, 4] (weather, time of day, light, lead close) and optionally features [S, F].
 torch::Tensor read_scene(Models& m, const std::vector<cv::Mat>& frames, torch::Tensor* features = nullptr);

@@ -31,7 +31,10 @@ int class_index(const std::vector<std::string>& classes, const std::string& name
   return -1;
 }
 
-ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t width) : kind(k) {
+ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t n, int64_t width)
+    : kind(k), frames(n > 0 ? n : (k == ProbeKind::kDynamics ? kDynamicsFrames : 1)) {
+  if (kind == ProbeKind::kScene && frames != 1) fail("scene probe: reads one frame, not {}", frames);
+  if (kind == ProbeKind::kDynamics && frames < 2) fail("dynamics probe: needs at least 2 frames, got {}", frames);
   // Four stride-2 stages (72x128 -> 5x8), GroupNorm + SiLU, then the global average: small enough to train in
   // minutes on a CPU, deep enough to see lane markings move and the colour of a traffic light.
   const int64_t cin = 3 * in_frames();
@@ -51,7 +54,8 @@ ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t width) : kind(k) {
 
 torch::Tensor ProbeNetImpl::features(const torch::Tensor& x) {
   if (x.dim() != 4 || x.size(1) != 3 * in_frames())
-    fail("{} probe: input must be [B, {}, H, W], got {}", to_string(kind), 3 * in_frames(), x.sizes().vec().size());
+    fail("{} probe: input must be [B, {}, H, W] ({} frames), got {}", to_string(kind), 3 * in_frames(), in_frames(),
+         c10::str(x.sizes()));
   return body->forward(x).mean({2, 3});  // [B, width]
 }
 

@@ -30,27 +30,32 @@ torch::Tensor probe_input(const std::vector<cv::Mat>& frames) {
 
 int dynamics_stride(const Config& c) { return std::max(1, int(std::lround(c.data.native_fps / c.data.world_fps))); }
 
-torch::Tensor inputs(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
-                     const std::vector<Example>& ex, int stride) {
+Span span_of(const ProbeNet& net, const Config& c) {
+  return net->kind == ProbeKind::kDynamics ? Span{int(net->frames), dynamics_stride(c)} : Span{};
+}
+
+torch::Tensor inputs(const std::vector<std::unique_ptr<data::Episode>>& eps, const std::vector<Example>& ex,
+                     const Span& span) {
   std::vector<torch::Tensor> xs;
   for (const auto& e : ex) {
-    std::vector<cv::Mat> f{eps.at(e.episode)->frame_bgr(e.frame)};
-    if (kind == ProbeKind::kDynamics) f.push_back(eps[e.episode]->frame_bgr(e.frame + stride));
+    std::vector<cv::Mat> f;
+    for (int k = 0; k < span.frames; ++k) f.push_back(eps.at(e.episode)->frame_bgr(e.frame + int64_t(k) * span.stride));
     xs.push_back(probe_input(f));
   }
   return torch::stack(xs);
 }
 
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
-                      const std::vector<Example>& ex, int stride) {
+                      const std::vector<Example>& ex, const Span& span) {
   if (kind == ProbeKind::kDynamics) {
+    const int64_t reach = span.reach();
     std::vector<float> v;
     for (const auto& e : ex) {
       const auto& ep = *eps.at(e.episode);
       double s = 0, c = 0;
-      for (int64_t i = e.frame; i <= e.frame + stride; ++i) s += ep.speed(i), c += ep.curvature(i);
-      s /= stride + 1;
-      c /= stride + 1;
+      for (int64_t i = e.frame; i <= e.frame + reach; ++i) s += ep.speed(i), c += ep.curvature(i);
+      s /= double(reach + 1);
+      c /= double(reach + 1);
       if (!std::isfinite(s) || !std::isfinite(c))
         fail("{}: frame {} has no speed/curvature (the dynamics probe needs them)", ep.dir().string(), e.frame);
       v.push_back(float(s / world::kSpeedScale));
@@ -76,14 +81,14 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
   return torch::tensor(v, torch::kLong).view({int64_t(ex.size()), 4});
 }
 
-torch::Tensor predict(ProbeNet& net, const ExampleSet& s, int stride, const torch::Device& dev) {
+torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev) {
   torch::NoGradGuard ng;
   const bool was_training = net->is_training();
   net->eval();
   std::vector<torch::Tensor> preds;
   for (size_t i = 0; i < s.frames.size(); i += 64) {
     std::vector<Example> part(s.frames.begin() + long(i), s.frames.begin() + long(std::min(s.frames.size(), i + 64)));
-    preds.push_back(net->forward(inputs(net->kind, s.episodes, part, stride).to(dev)).cpu());
+    preds.push_back(net->forward(inputs(s.episodes, part, span).to(dev)).cpu());
   }
   net->train(was_training);
   return torch::cat(preds);
@@ -147,16 +152,16 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   data::Dataset ds(opt.dataset);
   auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
   auto val_ids = split.held_out();
-  const int stride = opt.kind == ProbeKind::kDynamics ? dynamics_stride(cfg) : 0;
-  auto train = data::frame_set(ds, split.train, stride, 0);
-  auto val = data::frame_set(ds, val_ids, stride, opt.val_examples);
+  torch::manual_seed(cfg.run.seed);
+  ProbeNet net(opt.kind, opt.frames);
+  const Span span = span_of(net, cfg);
+  auto train = data::frame_set(ds, split.train, span.reach(), 0);
+  auto val = data::frame_set(ds, val_ids, span.reach(), opt.val_examples);
   const auto& train_eps = train.episodes;
   const auto& train_ex = train.frames;
   if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
   if (val.frames.empty() && on_note) on_note("no held-out episodes: validation skipped");
 
-  torch::manual_seed(cfg.run.seed);
-  ProbeNet net(opt.kind);
   net->to(dev);
   auto optim = train::make_adamw(net->parameters(), opt.lr, 1e-4, 0.9, 0.999);
   train::WarmupCosine sched{opt.lr, opt.lr / 20, 50, opt.steps};
@@ -173,7 +178,7 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   auto validate = [&] {
     nlohmann::json v;
     if (val.frames.empty()) return v;
-    return score(opt.kind, predict(net, val, stride, dev), targets(opt.kind, val.episodes, val.frames, stride));
+    return score(opt.kind, predict(net, val, span, dev), targets(opt.kind, val.episodes, val.frames, span));
   };
   net->train();
   while (step < opt.steps) {
@@ -181,9 +186,9 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     std::uniform_int_distribution<size_t> pick(0, train_ex.size() - 1);
     std::vector<Example> b;
     for (int i = 0; i < opt.batch; ++i) b.push_back(train_ex[pick(rng)]);
-    auto x = inputs(opt.kind, train_eps, b, stride).to(dev);
+    auto x = inputs(train_eps, b, span).to(dev);
     // Flip augmentation would swap left and right, which is the label of the dynamics probe: none here.
-    auto y = targets(opt.kind, train_eps, b, stride).to(dev);
+    auto y = targets(opt.kind, train_eps, b, span).to(dev);
     const double lr = sched(step);
     train::set_lr(*optim, lr);
     auto loss = loss_of(opt.kind, net->forward(x), y);
@@ -203,21 +208,29 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     result.weights = opt.out / ("probe-" + to_string(opt.kind) + ".safetensors");
     save_module(*net, result.weights,
                 {{"gaia.component", "probe"}, {"gaia.probe.kind", to_string(opt.kind)},
-                 {"gaia.probe.val", result.last_val.dump()}});
+                 {"gaia.probe.frames", std::to_string(net->frames)}, {"gaia.probe.val", result.last_val.dump()}});
   }
   return result;
 }
 
 ProbeNet load_probe(const fs::path& path, const torch::Device& device) {
   ProbeKind kind;
+  int64_t frames = 0;
   {
     SafetensorsFile f(path);
     auto md = f.metadata();
     if (md["gaia.component"] != "probe" || !md.count("gaia.probe.kind"))
       fail("{}: not a gaia probe weights file (no probe metadata)", path.string());
     kind = parse_kind(md["gaia.probe.kind"]);
+    if (kind == ProbeKind::kDynamics) frames = 2;  // saved before the frame count was recorded: a pair probe
+    if (md.count("gaia.probe.frames")) {
+      const std::string& v = md["gaia.probe.frames"];
+      if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos || std::stoll(v) < 1 || std::stoll(v) > 64)
+        fail("{}: metadata gaia.probe.frames '{}' is not a frame count", path.string(), v);
+      frames = std::stoll(v);
+    }
   }
-  ProbeNet net(kind);
+  ProbeNet net(kind, frames);
   load_module(*net, path);
   net->to(device);
   net->eval();

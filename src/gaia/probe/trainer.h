@@ -13,23 +13,29 @@
 
 namespace gaia::probe {
 
-// BGR frames (1 for scene, 2 for dynamics) -> one probe input [3 * frames, H, W] in [-1, 1].
+// BGR frames (1 for scene, K for dynamics) -> one probe input [3 * frames, H, W] in [-1, 1].
 torch::Tensor probe_input(const std::vector<cv::Mat>& frames);
 
-// One labelled example: frame i of an episode (and frame i + stride for dynamics).
+// One labelled example: frame i of an episode (and, for dynamics, frames i + stride, ..., i + (K - 1) stride).
 using Example = data::FrameRef;
 using ExampleSet = data::FrameSet;
-// The native frames between the two inputs of the dynamics probe: one world-model step (25 Hz / 6.25 Hz = 4).
+// The native frames between consecutive inputs of the dynamics probe: one world-model step (25 Hz / 6.25 Hz = 4).
 int dynamics_stride(const Config& c);
-// Targets of examples: dynamics [N, 2] normalised speed/curvature averaged over the step; scene [N, 4] int64 class
-// ids (weather, time, light, lead close). Errors name the episode when a label is missing.
+// What one example reads: `frames` frames, `stride` native frames apart (the scene probe: one frame).
+struct Span {
+  int frames = 1, stride = 0;
+  int reach() const { return (frames - 1) * stride; }  // native frames from the first input to the last
+};
+Span span_of(const ProbeNet& net, const Config& c);
+// Targets of examples: dynamics [N, 2] normalised speed/curvature averaged over the span's native frames; scene
+// [N, 4] int64 class ids (weather, time, light, lead close). Errors name the episode when a label is missing.
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
-                      const std::vector<Example>& ex, int stride);
-torch::Tensor inputs(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
-                     const std::vector<Example>& ex, int stride);
+                      const std::vector<Example>& ex, const Span& span);
+torch::Tensor inputs(const std::vector<std::unique_ptr<data::Episode>>& eps, const std::vector<Example>& ex,
+                     const Span& span);
 
 // Network outputs for a set, in batches (no gradients) -> [N, outputs] on the CPU.
-torch::Tensor predict(ProbeNet& net, const ExampleSet& s, int stride, const torch::Device& dev);
+torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev);
 
 // Metrics of predictions against targets: dynamics -> speed / curvature MAE (m/s, 1/m), Spearman, steering sign
 // accuracy (|curvature| >= 0.002 1/m); scene -> accuracy of each attribute.
@@ -38,6 +44,7 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
 struct ProbeTrainOptions {
   fs::path dataset, out;   // OUT/checkpoint/, OUT/probe-<kind>.safetensors, OUT/metrics.jsonl
   ProbeKind kind = ProbeKind::kScene;
+  int frames = 0;          // frames an example reads: 0 = kDynamicsFrames for dynamics, 1 for scene
   int steps = 1500, batch = 32, val_every = 250, val_examples = 512, stop_after = -1;
   double lr = 1e-3;
 };
@@ -53,7 +60,7 @@ ProbeTrainResult train_probe(const Config& config, const ProbeTrainOptions& opt,
                              const std::function<void(int step, int total, double loss, const nlohmann::json& val)>& on_step = {},
                              const std::function<void(const std::string&)>& on_note = {});
 
-// Loading a shipped probe (kind in the metadata).
+// Loading a shipped probe (kind and frames in the metadata; a dynamics file without frames is a pair probe).
 ProbeNet load_probe(const fs::path& path, const torch::Device& device);
 
 }  // namespace gaia::probe
