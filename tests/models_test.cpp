@@ -2,10 +2,12 @@
 // another seed). Each test skips with a message when its weights file is absent.
 #include <cmath>
 #include <iostream>
+#include <numeric>
 
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
+#include "gaia/control/text.h"
 #include "gaia/data/episode.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/trainer.h"
@@ -143,6 +145,35 @@ TEST(ShippedModels, WorldModelPredictsFreshDrivesBetterThanCompressors) {
   const auto& b = j["bits_per_token"];
   EXPECT_LT(b["world_model"].get<double>(), 8.0) << b.dump();
   EXPECT_GT(b["ratio_best_compressor_over_model"].get<double>(), 1.35) << b.dump();
+}
+
+// The ceiling of the text-control accuracies: the shipped scene probe reads the weather and time of day of real
+// frames that went through the shipped tokenizer (what a perfectly prompted scene would score), per prompted value.
+TEST(ShippedModels, SceneProbeReadsDecodedRealFramesOfEachPromptedKind) {
+  if (!fs::exists(model("tokenizer.safetensors")) || !fs::exists(model("probe-scene.safetensors")))
+    GTEST_SKIP() << "models/tokenizer.safetensors or probe-scene.safetensors not shipped";
+  test::TempDir d;
+  auto ds = fresh_synth(d, "", {{"clear", "day"}, {"rain", "dusk"}, {"fog", "night"}, {"snow", "day"}, {"overcast", "dusk"}});
+  auto r = test::run_gaia("tokenize " + q(ds) + " --tokenizer " + q(model("tokenizer.safetensors")) + " --out " + q(d / "tok"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  control::Models m;
+  m.tok = tokenizer::load_tokenizer(model("tokenizer.safetensors"), torch::kCPU);
+  m.info.grid_h = 9;
+  m.info.grid_w = 16;
+  m.scene = probe::load_probe(model("probe-scene.safetensors"), torch::kCPU);
+  world::TokenDataset tokens(d / "tok");
+  std::vector<size_t> all(tokens.ids().size());
+  std::iota(all.begin(), all.end(), size_t(0));
+  auto j = control::real_decoded_accuracy(m, tokens, all, 8);
+  EXPECT_EQ(j["episodes"].get<int>(), 5) << j.dump();  // overcast is no prompted weather, but dusk is a prompted time
+  for (const char* v : {"clear", "rain", "fog", "snow", "day", "dusk", "night"}) {
+    ASSERT_TRUE(j["per_target"].contains(v)) << v << " " << j.dump();
+    EXPECT_GE(j["per_target"][v].get<double>(), 0.0);
+    EXPECT_LE(j["per_target"][v].get<double>(), 1.0);
+  }
+  EXPECT_GE(j["time_of_day"].get<double>(), 0.9) << j.dump();
+  EXPECT_GE(j["weather"].get<double>(), 0.6) << j.dump();
+  std::cout << j.dump() << "\n";
 }
 
 TEST(ShippedModels, DemoRunsWithTheShippedModels) {

@@ -220,6 +220,14 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
       EXPECT_GE(row[k].get<double>(), 0.0);
       EXPECT_LE(row[k].get<double>(), 1.0);
     }
+  // The ceiling row: the probe on real held-out frames through the same decoder, for the prompted kinds it has.
+  const auto& real = j["text_control"]["real_decoded"];
+  EXPECT_EQ(real["frames"].get<int>(), 16);
+  EXPECT_GE(real["episodes"].get<int>(), 1) << real.dump();
+  for (auto it = real["per_target"].begin(); it != real["per_target"].end(); ++it) {
+    EXPECT_GE(it.value().get<double>(), 0.0) << it.key();
+    EXPECT_LE(it.value().get<double>(), 1.0) << it.key();
+  }
   const double dist = j["futures"]["mean_pairwise_token_distance"].get<double>();
   EXPECT_GT(dist, 0.0);  // top-k sampling: futures differ
   EXPECT_LE(dist, 1.0);

@@ -109,7 +109,7 @@ void register_eval(CLI::App& app) {
       o.scales = e->scales;
       o.sampling = sampling;
       o.seed = uint64_t(run.run.seed);
-      j["text_control"] = control::text_control(m, o, out);
+      j["text_control"] = control::text_control(m, o, out, &ds);
       bar.update(++done, "text control");
     }
     control::RolloutEvalOptions ro;

@@ -1,5 +1,7 @@
 #include "gaia/control/text.h"
 
+#include <map>
+
 #include "gaia/core/error.h"
 #include "gaia/eval/svg_plot.h"
 #include "gaia/world/rollout.h"
@@ -30,7 +32,53 @@ struct Run {
 
 }  // namespace
 
-nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out) {
+nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, const std::vector<size_t>& episodes,
+                                     int frames_per_episode) {
+  if (frames_per_episode < 1) fail("real_decoded_accuracy: frames_per_episode must be >= 1");
+  const auto targets = text_targets();
+  std::map<std::string, std::pair<double, double>> hits;  // prompted value -> (frames read as it, frames)
+  const int64_t n = ds.tokens_per_step();
+  int used = 0;
+  for (size_t e : episodes) {
+    const auto& meta = ds.meta(e);
+    const int64_t S = ds.steps(e);
+    if (S < 1) continue;
+    std::vector<const TextTarget*> mine;  // the prompted values this episode shows
+    for (const auto& t : targets)
+      if ((t.attribute == 0 && t.value == meta.weather) || (t.attribute == 1 && t.value == meta.time_of_day))
+        mine.push_back(&t);
+    if (mine.empty()) continue;
+    auto ep = ds.episode(e);
+    auto all = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()), {S, n}, torch::kInt).to(torch::kLong);
+    std::vector<int64_t> steps;
+    for (int k = 0; k < frames_per_episode; ++k) steps.push_back(std::min<int64_t>(S - 1, k * S / frames_per_episode));
+    auto frames = decode(m, all.index_select(0, torch::tensor(steps)).unsqueeze(0))[0];
+    auto cls = read_scene(m, frames);  // [F, 4]
+    for (const auto* t : mine) {
+      const int want = probe::class_index(classes(t->attribute), t->value);
+      auto& h = hits[t->value];
+      h.first += double(cls.select(1, t->attribute).eq(want).sum().item<int64_t>());
+      h.second += double(frames.size());
+    }
+    ++used;
+  }
+  nlohmann::json j = {{"frames", frames_per_episode}, {"episodes", used}, {"per_target", nlohmann::json::object()}};
+  for (int a = 0; a < 2; ++a) {
+    double sum = 0;
+    int count = 0;
+    for (const auto& t : targets) {
+      auto it = hits.find(t.value);
+      if (t.attribute != a || it == hits.end()) continue;
+      j["per_target"][t.value] = it->second.first / it->second.second;
+      sum += it->second.first / it->second.second;
+      ++count;
+    }
+    j[kAttributes[a]] = count ? nlohmann::json(sum / count) : nlohmann::json(nullptr);
+  }
+  return j;
+}
+
+nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real) {
   const auto targets = text_targets();
   const int64_t G = int64_t(targets.size()), N = G * o.futures, F = o.frames, M = m.info.config.world.text_tokens;
   if (m.info.vocab.size() == 0) fail("the world model has no text vocabulary (trained without captions)");
@@ -106,6 +154,12 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out) {
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& r : table)
     rows.push_back({r["setting"], r["weather"], r["time_of_day"], r["light"]});
+  if (real) {  // what the probe reads on real scenes of the prompted kinds: the most a prompt can score
+    j["real_decoded"] =
+        real_decoded_accuracy(m, *real, real->indices(real->split(0.1, m.info.config.run.seed).held_out()), 16);
+    rows.push_back({"real held-out frames through the same decoder (the probe's ceiling)", j["real_decoded"]["weather"],
+                    j["real_decoded"]["time_of_day"], nullptr});
+  }
   std::vector<std::vector<cv::Mat>> top_row(best_rows.begin(), best_rows.begin() + std::min<size_t>(5, best_rows.size()));
   std::vector<std::vector<cv::Mat>> bottom_row(best_rows.begin() + std::min<size_t>(5, best_rows.size()), best_rows.end());
   std::vector<cv::Mat> video = tile(top_row, best_labels);

@@ -24,6 +24,14 @@ struct TextEvalOptions {
   uint64_t seed = 0;
 };
 
-nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out);
+// The ceiling of those accuracies: the scene probe on decoded real frames (`frames_per_episode` evenly spaced steps
+// of each of these token episodes, through the same tokenizer decoder) whose episode's weather / time of day is a
+// prompted value -> {"per_target": {value: accuracy}, "weather", "time_of_day" (means over the values present),
+// "frames", "episodes"}. Light states are per frame and not in token episodes' metadata: not measured.
+nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, const std::vector<size_t>& episodes,
+                                     int frames_per_episode);
+
+// real: the token dataset whose held-out episodes give the ceiling above; nullptr skips it.
+nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real = nullptr);
 
 }  // namespace gaia::control
