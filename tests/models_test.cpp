@@ -32,6 +32,14 @@ fs::path fresh_synth(const test::TempDir& d, const std::string& extra, const std
   return d / "ds";
 }
 
+// fresh_synth's drives tokenized with the shipped tokenizer -> the token dataset's directory.
+fs::path fresh_tokens(const test::TempDir& d, const std::vector<std::pair<std::string, std::string>>& wt) {
+  auto ds = fresh_synth(d, "", wt);
+  auto r = test::run_gaia("tokenize " + q(ds) + " --tokenizer " + q(model("tokenizer.safetensors")) + " --out " + q(d / "tok"));
+  if (r.status != 0) throw std::runtime_error(r.output);
+  return d / "tok";
+}
+
 // A shipped probe's scores on a dataset (the frames each example reads come from the probe file and the default
 // config: one world-model step apart).
 nlohmann::json probe_scores(const std::string& weights, const fs::path& ds_dir, int examples) {
@@ -135,10 +143,8 @@ TEST(ShippedModels, WorldModelPredictsFreshDrivesBetterThanCompressors) {
   if (!fs::exists(model("world.safetensors")) || !fs::exists(model("tokenizer.safetensors")))
     GTEST_SKIP() << "models/world.safetensors or tokenizer.safetensors not shipped";
   test::TempDir d;
-  auto ds = fresh_synth(d, "", {{"clear", "day"}, {"rain", "dusk"}, {"snow", "night"}, {"fog", "day"}, {"clear", "night"}});
-  auto r = test::run_gaia("tokenize " + q(ds) + " --tokenizer " + q(model("tokenizer.safetensors")) + " --out " + q(d / "tok"));
-  ASSERT_EQ(r.status, 0) << r.output;
-  r = test::run_gaia("world eval " + q(d / "tok") + " --world " + q(model("world.safetensors")) +
+  auto tok = fresh_tokens(d, {{"clear", "day"}, {"rain", "dusk"}, {"snow", "night"}, {"fog", "day"}, {"clear", "night"}});
+  auto r = test::run_gaia("world eval " + q(tok) + " --world " + q(model("world.safetensors")) +
                      " --max-windows 16 --out " + q(d / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(d / "eval" / "eval.json"));
@@ -153,15 +159,13 @@ TEST(ShippedModels, SceneProbeReadsDecodedRealFramesOfEachPromptedKind) {
   if (!fs::exists(model("tokenizer.safetensors")) || !fs::exists(model("probe-scene.safetensors")))
     GTEST_SKIP() << "models/tokenizer.safetensors or probe-scene.safetensors not shipped";
   test::TempDir d;
-  auto ds = fresh_synth(d, "", {{"clear", "day"}, {"rain", "dusk"}, {"fog", "night"}, {"snow", "day"}, {"overcast", "dusk"}});
-  auto r = test::run_gaia("tokenize " + q(ds) + " --tokenizer " + q(model("tokenizer.safetensors")) + " --out " + q(d / "tok"));
-  ASSERT_EQ(r.status, 0) << r.output;
+  auto tok = fresh_tokens(d, {{"clear", "day"}, {"rain", "dusk"}, {"fog", "night"}, {"snow", "day"}, {"overcast", "dusk"}});
   control::Models m;
   m.tok = tokenizer::load_tokenizer(model("tokenizer.safetensors"), torch::kCPU);
   m.info.grid_h = 9;
   m.info.grid_w = 16;
   m.scene = probe::load_probe(model("probe-scene.safetensors"), torch::kCPU);
-  world::TokenDataset tokens(d / "tok");
+  world::TokenDataset tokens(tok);
   std::vector<size_t> all(tokens.ids().size());
   std::iota(all.begin(), all.end(), size_t(0));
   auto j = control::real_decoded_accuracy(m, tokens, all, 8);
