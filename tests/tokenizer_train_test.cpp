@@ -266,6 +266,26 @@ TEST(TokenizerTrain, EmaAveragesTheDecoderResumesExactlyAndKeepsTheCodes) {
   ASSERT_EQ(a.names(), b.names());
   for (auto& n : a.names())
     EXPECT_TRUE(torch::allclose(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)), 1e-6, 1e-7)) << n;
+
+  // Checkpointed without the average (ema_decay = 0) and resumed with it: the average starts from the resumed
+  // weights (said in a note), is checkpointed from then on, and the run ends with an averaged decoder.
+  Config plain = g;
+  plain.tokenizer.ema_decay = 0;
+  o.out = dir / "late";
+  o.stop_after = 7;
+  tokenizer::train_tokenizer(plain, o);
+  EXPECT_FALSE(fs::exists(dir / "late" / "checkpoint" / "ema.safetensors"));
+  o.stop_after = -1;
+  std::string notes;
+  auto late = tokenizer::train_tokenizer(g, o, {}, [&](const std::string& n) { notes += n + "\n"; });
+  EXPECT_TRUE(late.resumed);
+  EXPECT_NE(notes.find("starts at step 7"), std::string::npos) << notes;
+  EXPECT_TRUE(fs::exists(dir / "late" / "checkpoint" / "ema.safetensors"));
+  SafetensorsFile raw_late(dir / "late" / "checkpoint" / "tokenizer.safetensors"), saved_late(dir / "late" / "tokenizer.safetensors");
+  int differ = 0;
+  for (auto& n : saved_late.names())
+    if (n.rfind("decoder.", 0) == 0) differ += !torch::equal(tensor_from_view(saved_late.get(n)), tensor_from_view(raw_late.get(n)));
+  EXPECT_GT(differ, 10);  // an average of steps 7..12, not the last step's weights
 }
 
 TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {

@@ -104,13 +104,23 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   std::vector<int64_t> usage(static_cast<size_t>(tc.codebook_size), 0);
   std::vector<std::pair<std::string, torch::nn::Module*>> modules{{"tokenizer", model.ptr().get()},
                                                                    {"discriminator", disc.ptr().get()}};
-  if (averaged) modules.emplace_back("ema", averaged.ptr().get());
+  // A checkpoint written with ema_decay = 0 has no average to resume: turning the EMA on then starts it afresh.
+  bool average_from_here = false;
+  if (averaged) {
+    average_from_here = train::has_checkpoint(ckpt) && !fs::exists(ckpt / "ema.safetensors");
+    if (!average_from_here) modules.emplace_back("ema", averaged.ptr().get());
+  }
   if (train::has_checkpoint(ckpt)) {
     auto st = train::load_checkpoint(ckpt, modules, {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}});
     step = st.step;
     usage = st.extra.value("usage", usage);
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
+    if (average_from_here) {
+      train::ema_copy(*averaged, *model);
+      modules.emplace_back("ema", averaged.ptr().get());  // saved with the next checkpoint
+      note(fmt::format("the checkpoint has no weight average (ema_decay was 0): it starts at step {}", step));
+    }
   }
   else if (!opt.init.empty()) {
     // Fine-tuning: weights from an earlier run, fresh optimiser and schedule. The architecture must match.
