@@ -23,7 +23,7 @@ namespace {
 constexpr double kSteerThreshold = 0.002;  // 1/m: below this a command or read-back counts as straight
 
 struct Readback {
-  std::vector<double> speed, curvature;  // per rollout, mean over its generated frames
+  std::vector<double> speed, curvature;  // per rollout, mean over its probe windows
   std::vector<double> pair_cmd, pair_read;  // per read-back window of the probe (a frame pair for K = 2): curvature
 };
 
