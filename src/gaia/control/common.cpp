@@ -31,6 +31,12 @@ Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::p
   return m;
 }
 
+torch::Tensor episode_tokens(const world::TokenDataset& ds, size_t e) {
+  auto ep = ds.episode(e);
+  return torch::from_blob(const_cast<int32_t*>(ep->tokens.data()), {ds.steps(e), ds.tokens_per_step()}, torch::kInt)
+      .to(torch::kLong);
+}
+
 Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed) {
   auto split = ds.split(0.1, seed);
   auto ids = split.held_out();
@@ -50,8 +56,7 @@ Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frame
     auto [e, s] = pool[(size_t(i) * pool.size()) / size_t(count)];
     p.episodes.push_back(e);
     p.starts.push_back(s);
-    auto ep = ds.episode(e);
-    p.tokens[i].copy_(torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + s * n, {frames, n}, torch::kInt));
+    p.tokens[i].copy_(episode_tokens(ds, e).narrow(0, s, frames));
     p.actions[i].copy_(torch::from_blob(const_cast<float*>(ds.actions(e).data()) + 2 * s, {frames, 2}, torch::kFloat));
     p.actions[i].select(1, 0).div_(world::kSpeedScale);
     p.actions[i].select(1, 1).div_(world::kCurvatureScale);

@@ -42,6 +42,9 @@ struct Prompts {
 };
 Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed);
 
+// One token episode's image tokens -> [steps, n] int64 (a copy: it outlives the dataset's episode cache).
+torch::Tensor episode_tokens(const world::TokenDataset& ds, size_t e);
+
 // Token rollouts [N, S, n] -> N sequences of S BGR frames through the tokenizer's decoder.
 std::vector<std::vector<cv::Mat>> decode(Models& m, const torch::Tensor& tokens);
 

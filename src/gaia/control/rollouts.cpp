@@ -35,11 +35,8 @@ RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t w
   auto ids = split.held_out();
   RealReference r;
   std::vector<torch::Tensor> picks;
-  const int64_t n = ds.tokens_per_step();
   for (size_t e : ds.indices(ids)) {
-    auto ep = ds.episode(e);
-    auto all = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()), {ds.steps(e), n}, torch::kInt)
-                   .to(torch::kLong);
+    auto all = episode_tokens(ds, e);
     for (int64_t s = 0; s + window <= ds.steps(e); s += window) r.windows.push_back(all.narrow(0, s, window));
     for (int64_t k = 0; k < ds.steps(e); k += 5) picks.push_back(all[k]);
   }

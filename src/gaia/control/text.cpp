@@ -37,7 +37,6 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
   if (frames_per_episode < 1) fail("real_decoded_accuracy: frames_per_episode must be >= 1");
   const auto targets = text_targets();
   std::map<std::string, std::pair<double, double>> hits;  // prompted value -> (frames read as it, frames)
-  const int64_t n = ds.tokens_per_step();
   int used = 0;
   for (size_t e : episodes) {
     const auto& meta = ds.meta(e);
@@ -48,8 +47,7 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
       if ((t.attribute == 0 && t.value == meta.weather) || (t.attribute == 1 && t.value == meta.time_of_day))
         mine.push_back(&t);
     if (mine.empty()) continue;
-    auto ep = ds.episode(e);
-    auto all = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()), {S, n}, torch::kInt).to(torch::kLong);
+    auto all = episode_tokens(ds, e);
     std::vector<int64_t> steps;
     for (int k = 0; k < frames_per_episode; ++k) steps.push_back(std::min<int64_t>(S - 1, k * S / frames_per_episode));
     auto frames = decode(m, all.index_select(0, torch::tensor(steps)).unsqueeze(0))[0];
