@@ -85,17 +85,23 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   EXPECT_EQ(blended["psnr_6.25hz"].get<double>(), j["tokenizer_decoder"]["psnr_6.25hz"].get<double>());
   EXPECT_NE(blended["psnr_25hz"].get<double>(), j["tokenizer_decoder"]["psnr_25hz"].get<double>());
   EXPECT_GT(j["video_decoder"]["1"]["seconds_per_ddim_step"].get<double>(), 0);
+  EXPECT_GT(j["ground_truth"]["edge_energy"].get<double>(), 0);
+  EXPECT_GT(j["video_decoder"]["1"]["sharpness"].get<double>(), 0);
+  EXPECT_GT(j["tokenizer_decoder_blended"]["sharpness"].get<double>(), 0);
   EXPECT_EQ(j["noise_correlation"].get<double>(), 0.0);
   EXPECT_EQ(j["noise_scale"].get<double>(), gaia::Config().decoder.noise_scale);  // the built-in default
 
   // --set reaches the sampling options of the decoder read from its file; its architecture is the file's.
   r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
-                     " --clips 1 --token-frames 3 --steps 2 --set decoder.noise_correlation=1 --set decoder.noise_scale=0.5" + p.tiny() + " --out " +
+                     " --clips 1 --token-frames 3 --steps 2 --set decoder.noise_correlation=1 --set decoder.noise_scale=0.5" +
+                     " --set decoder.start_time=0.6" + p.tiny() + " --out " +
                      q(p.dir / "eval-r1"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j1 = nlohmann::json::parse(read_file(p.dir / "eval-r1" / "eval.json"));
   EXPECT_EQ(j1["noise_correlation"].get<double>(), 1.0);
   EXPECT_EQ(j1["noise_scale"].get<double>(), 0.5);
+  EXPECT_EQ(j1["start_time"].get<double>(), 0.6);
+  EXPECT_EQ(j["start_time"].get<double>(), 1.0);
   EXPECT_NE(j1["video_decoder"]["2"]["psnr_25hz"].get<double>(), j["video_decoder"]["2"]["psnr_25hz"].get<double>());
   r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
                      q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 1 --set decoder.channels=64" + p.tiny() +

@@ -115,6 +115,37 @@ TEST(DecoderDiffusion, DdimWithAnalyticDenoiserMapsNoiseToTheDataDistribution) {
   EXPECT_LT(err100, 20 * err);
 }
 
+// decoder.start_time: DDIM from a noised datum at t0 < 1 follows the same ODE from there, so the analytic denoiser
+// maps z_t0 to mu + s xi(t0) (SDEdit's start, exact for the probability-flow ODE).
+TEST(DecoderDiffusion, DdimFromALaterStartTimeFollowsTheOdeFromThere) {
+  const auto grid = ddim_times(4, 0.5);
+  ASSERT_EQ(grid.size(), 5u);
+  EXPECT_DOUBLE_EQ(grid[0], 0.5);
+  EXPECT_DOUBLE_EQ(grid[1], 0.375);
+  EXPECT_DOUBLE_EQ(grid[4], 0.0);
+  NoiseSchedule sch;
+  torch::manual_seed(3);
+  auto mu = torch::randn({64}, torch::kFloat64), sd = torch::rand({64}, torch::kFloat64) * 0.8 + 0.2;
+  auto v_fn = [&](const torch::Tensor& z, double t) {
+    auto tt = torch::tensor({t}, torch::kFloat64);
+    auto a = sch.alpha(tt), g = sch.sigma(tt);
+    auto x_hat = mu + a * sd * sd * (z - a * mu) / (a * a * sd * sd + g * g);
+    return a * (z - a * x_hat) / g - g * x_hat;
+  };
+  const double t0 = 0.4;
+  auto tt0 = torch::tensor({t0}, torch::kFloat64);
+  auto a0 = sch.alpha(tt0), g0 = sch.sigma(tt0);
+  auto x = mu + sd * torch::randn({64}, torch::kFloat64);
+  auto z0 = a0 * x + g0 * torch::randn({64}, torch::kFloat64);  // a datum noised to t0
+  auto want = mu + sd * (z0 - a0 * mu) / (a0 * a0 * sd * sd + g0 * g0).sqrt();
+  const double err = (ddim_loop(z0.clone(), 1000, sch, v_fn, t0) - want).abs().max().item<double>();
+  EXPECT_LT(err, 5e-3);
+  // Read as if it started at t = 1, the same z lands elsewhere: the start time is used.
+  EXPECT_GT((ddim_loop(z0.clone(), 1000, sch, v_fn) - want).abs().max().item<double>(), 20 * err);
+  EXPECT_NE(test::error_of([&] { ddim_loop(z0, 10, sch, v_fn, 0.0); }).find("decoder.start_time"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { ddim_loop(z0, 10, sch, v_fn, 1.5); }).find("decoder.start_time"), std::string::npos);
+}
+
 TEST(DecoderTasks, MasksForEveryTask) {
   auto img = task_masks(Task::kImage, 7);
   EXPECT_FALSE(img.temporal);
@@ -360,6 +391,20 @@ TEST(DecoderEval, FlickerAndTemporalError) {
   EXPECT_GT(temporal_error(noisy, x), 0.1 * 127.5 * 0.9);              // E|n1 - n2| = 0.1 * 2 / sqrt(pi) ~ 0.113
   EXPECT_LT(temporal_error(noisy, x), 0.1 * 127.5 * 1.4);
   EXPECT_THROW(temporal_error(x, x.slice(0, 1)), gaia::Error);
+}
+
+// Edge energy (the sharpness the decoder eval reports as a ratio to the truth's): a flat frame has none, a
+// checkerboard of +-a has 2a between every pair of neighbours, and blurring lowers it.
+TEST(DecoderEval, EdgeEnergyMeasuresFineDetail) {
+  EXPECT_DOUBLE_EQ(edge_energy(torch::full({2, 3, 8, 8}, 0.4)), 0.0);
+  auto idx = torch::arange(8);
+  auto checker = ((idx.view({8, 1}) + idx.view({1, 8})) % 2).to(torch::kFloat32) * 0.5 - 0.25;  // +-0.25
+  EXPECT_NEAR(edge_energy(checker.expand({2, 3, 8, 8})), 0.5 * 127.5, 1e-4);
+  torch::manual_seed(13);
+  auto x = torch::rand({2, 3, 16, 16}) * 2 - 1;
+  auto blurred = torch::avg_pool2d(x.view({6, 1, 16, 16}), 3, 1, 1, false, false).view({2, 3, 16, 16});
+  EXPECT_LT(edge_energy(blurred), 0.6 * edge_energy(x));
+  EXPECT_DOUBLE_EQ(edge_energy(x * 3), edge_energy((x * 3).clamp(-1, 1)));  // frames are clamped first
 }
 
 // The 25 Hz baseline from 6.25 Hz tokens: key frames kept, the frames between them on the straight line, so a
@@ -644,4 +689,54 @@ TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
   EXPECT_NE(test::error_of([&] { sample_window(m, sch, w, o); }).find("decoder.noise_scale"), std::string::npos);
   c.decoder.noise_scale = -0.1;
   EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_scale"), std::string::npos);
+}
+
+// decoder.start_time < 1 starts from the coarse frame noised to that level. With v = 0 every DDIM step multiplies z by
+// alpha_s alpha_t + sigma_s sigma_t, so a fresh model (v ~ 0) leaves a residual over the coarse frame of
+// sigma(t0) n times the product of those factors over the grid from t0: the residual follows the start's noise
+// level. Without a coarse frame a start below 1 is an error.
+TEST(DecoderSampler, StartTimeRefinesTheCoarseFrame) {
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v ~ 0
+  torch::NoGradGuard ng;
+  auto in = random_input(m, 1, 5, 32, 64, 8);
+  auto w = all_frames_generated(m, in);
+  w.cond_image = (in.cond_image * 0.3).contiguous();
+  NoiseSchedule sch;
+  auto o = sample_options(c.decoder, 3, 11);
+  EXPECT_EQ(o.start_time, c.decoder.start_time);  // the config's
+  EXPECT_EQ(o.start_time, 1.0);                   // the paper's sampler by default
+  o.mix_probability = 0;
+  o.noise_scale = 0.5;  // keeps the samples inside the clamp to [-1, 1]
+  const auto base = w.cond_image.clamp(-1, 1);
+  auto sample = [&](double start) {
+    o.start_time = start;
+    return sample_window(m, sch, w, o);
+  };
+  auto at = [&](double t) { return torch::tensor({t}, torch::kFloat64); };
+  auto v0_factor = [&](double start) {  // sigma(t0) prod (alpha_s alpha_t + sigma_s sigma_t)
+    const auto g = ddim_times(3, start);
+    double f = start < 1 ? sch.sigma(at(start)).item<double>() : 1.0;
+    for (size_t i = 0; i + 1 < g.size(); ++i)
+      f *= (sch.alpha(at(g[i])) * sch.alpha(at(g[i + 1])) + sch.sigma(at(g[i])) * sch.sigma(at(g[i + 1]))).item<double>();
+    return f;
+  };
+  const auto full = sample(1.0), half = sample(0.5), low = sample(0.2);
+  auto inside = (full.abs() < 0.999).logical_and(half.abs() < 0.999).logical_and(low.abs() < 0.999);
+  ASSERT_GT(inside.sum().item<int64_t>(), 1000);  // away from the clamp
+  auto residual = [&](const torch::Tensor& x) { return (x - base).masked_select(inside).abs().mean().item<double>(); };
+  const double r1 = residual(full);
+  EXPECT_GT(r1, 0.05);
+  EXPECT_NEAR(residual(half) / r1, v0_factor(0.5) / v0_factor(1.0), 0.05);
+  EXPECT_NEAR(residual(low) / r1, v0_factor(0.2) / v0_factor(1.0), 0.05);
+  EXPECT_LT(v0_factor(0.2) / v0_factor(1.0), 0.6);  // the test tells a start of 0.2 from one of 1
+  o.start_time = 0.5;
+  auto no_cond = w;
+  no_cond.cond_image = torch::Tensor();
+  EXPECT_NE(test::error_of([&] { sample_window(m, sch, no_cond, o); }).find("decoder.start_time"), std::string::npos);
+  c.decoder.start_time = 0;
+  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.start_time"), std::string::npos);
+  c.decoder.start_time = 0.5;
+  c.decoder.cond_image = false;
+  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.cond_image"), std::string::npos);
 }

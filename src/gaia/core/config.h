@@ -111,6 +111,10 @@ struct DecoderConfig {
   // sampler.h SampleOptions: temperature of the starting noise (paper: 1). The CPU decoder is 0.3-0.4 dB closer
   // to the true frames at 0.5, with a lower temporal error, at 10, 20 and 50 DDIM steps (MODEL_CARD.md).
   double noise_scale = 0.5;
+  // sampler.h SampleOptions: the noise level DDIM starts from (paper: 1, pure noise). Below 1 (needs cond_image)
+  // the residual over the coarse frame starts at zero, noised to this level, so the sampler refines the coarse
+  // frame instead of drawing its detail from scratch (SDEdit, Meng et al. 2022).
+  double start_time = 1.0;
   double w_l1 = 0.1, w_l2 = 1.0;  // paper §4.3
   double ema_decay = 0.999;      // paper §4.3
   // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6 (batch 64, 300k

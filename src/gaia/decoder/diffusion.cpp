@@ -54,9 +54,9 @@ torch::Tensor interpolation_base(const torch::Tensor& cond_image, const torch::T
   return out;
 }
 
-std::vector<double> ddim_times(int steps) {
+std::vector<double> ddim_times(int steps, double start) {
   std::vector<double> t(size_t(steps) + 1);
-  for (int i = 0; i <= steps; ++i) t[size_t(i)] = 1.0 - double(i) / steps;
+  for (int i = 0; i <= steps; ++i) t[size_t(i)] = start * (1.0 - double(i) / steps);
   return t;
 }
 

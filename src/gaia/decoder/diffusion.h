@@ -67,7 +67,7 @@ inline torch::Tensor coarse_base(const torch::Tensor& cond_image, const torch::T
 torch::Tensor interpolation_base(const torch::Tensor& cond_image, const torch::Tensor& frames,
                                  const torch::Tensor& context, const torch::Tensor& has_tokens);
 
-// The DDIM time grid: steps + 1 times from 1 down to 0, uniformly spaced.
-std::vector<double> ddim_times(int steps);
+// The DDIM time grid: steps + 1 times from `start` (1 = pure noise) down to 0, uniformly spaced.
+std::vector<double> ddim_times(int steps, double start = 1.0);
 
 }  // namespace gaia::decoder

@@ -27,6 +27,13 @@ double temporal_error(const torch::Tensor& f, const torch::Tensor& x) {
   return (df - dx).abs().mean().item<double>() * 127.5;
 }
 
+double edge_energy(const torch::Tensor& f) {
+  const auto g = f.clamp(-1, 1);
+  const double dx = (g.slice(-1, 1) - g.slice(-1, 0, -1)).abs().mean().item<double>();
+  const double dy = (g.slice(-2, 1) - g.slice(-2, 0, -1)).abs().mean().item<double>();
+  return (dx + dy) / 2 * 127.5;
+}
+
 double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b) {
   const double mse = (a.clamp(-1, 1) - b).pow(2).mean().item<double>() / 4.0;
   return 10 * std::log10(1.0 / std::max(mse, 1e-12));
@@ -75,9 +82,12 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["frames_25hz"] = M;
   out["noise_correlation"] = d.sample.noise_correlation;
   out["noise_scale"] = d.sample.noise_scale;
+  out["start_time"] = d.sample.start_time;
   std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
   std::vector<double> tok_key_err, tok_all_err, blend_all, blend_all_change, blend_all_err;
+  std::vector<double> gt_edges, tok_edges, blend_edges;  // edge_energy over the 25 Hz frames
   std::map<int, std::vector<double>> dif_key, dif_all, dif_key_change, dif_all_change, dif_key_err, dif_all_err, secs;
+  std::map<int, std::vector<double>> dif_edges;
   for (size_t c = 0; c < refs.size(); ++c) {
     auto clip = load_clips(episodes, {refs[c]}, tok, true, dev);  // all 25 Hz frames, their tokens and decodings
     auto gt = clip.frames[0];                                      // [M, 3, H, W]
@@ -97,6 +107,9 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     blend_all.push_back(psnr_pm1(blended, gt));
     blend_all_change.push_back(temporal_change(blended));
     blend_all_err.push_back(temporal_error(blended, gt));
+    gt_edges.push_back(edge_energy(gt));
+    tok_edges.push_back(edge_energy(tok_dec));
+    blend_edges.push_back(edge_energy(blended));
     auto tokens = clip.tokens.index_select(1, key);  // [1, N, h, w]
     auto cond = model->cfg.cond_image ? clip.cond.index_select(1, key) : torch::Tensor();
     for (int s : o.steps) {
@@ -114,6 +127,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
       dif_all_change[s].push_back(temporal_change(video));
       dif_key_err[s].push_back(temporal_error(video_key, gt_key));
       dif_all_err[s].push_back(temporal_error(video, gt));
+      dif_edges[s].push_back(edge_energy(video));
     }
   }
   auto mean = [](const std::vector<double>& v) {
@@ -122,15 +136,18 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     return v.empty() ? 0.0 : s / double(v.size());
   };
   const double gk = mean(gt_key_change), ga = mean(gt_all_change);
-  out["ground_truth"] = {{"change_6.25hz", gk}, {"change_25hz", ga}};
+  const double ge = mean(gt_edges);
+  out["ground_truth"] = {{"change_6.25hz", gk}, {"change_25hz", ga}, {"edge_energy", ge}};
   out["tokenizer_decoder"] = {{"psnr_6.25hz", mean(tok_key)}, {"psnr_25hz", mean(tok_all)},
                               {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(tok_all_change) - ga},
                               {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(tok_all_err)},
+                              {"sharpness", mean(tok_edges) / ge},
                               {"note", "frame by frame from every frame's own tokens (at 25 Hz it gets 4x the tokens)"}};
   out["tokenizer_decoder_blended"] = {
       {"psnr_6.25hz", mean(tok_key)},      {"psnr_25hz", mean(blend_all)},
       {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(blend_all_change) - ga},
       {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(blend_all_err)},
+      {"sharpness", mean(blend_edges) / ge},
       {"note", "frame by frame from the 6.25 Hz tokens, linearly blended to 25 Hz (the video decoder's information)"}};
   for (int s : o.steps) {
     const double sec = mean(secs[s]);
@@ -142,6 +159,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
         {"flicker_25hz", mean(dif_all_change[s]) - ga},
         {"temporal_error_6.25hz", mean(dif_key_err[s])},
         {"temporal_error_25hz", mean(dif_all_err[s])},
+        {"sharpness", mean(dif_edges[s]) / ge},  // edge energy at 25 Hz over the ground truth's
         {"seconds_per_clip", sec},
         {"seconds_per_ddim_step", sec / (windows * s)},  // one step of one T'-frame window (mixing included)
         {"seconds_per_output_second", sec / ((M - 1) / 25.0)}};

@@ -22,6 +22,10 @@ double temporal_change(const torch::Tensor& frames);
 // however much its errors jump from frame to frame; this one counts those jumps, and is 0 only when every change
 // is the true one.
 double temporal_error(const torch::Tensor& frames, const torch::Tensor& truth);
+// Mean absolute difference between horizontally and vertically neighbouring pixels (0-255 scale), frames [..., H, W]
+// in [-1, 1]: how much fine detail the frames hold. Reported as the ratio to the ground truth's (1 = as sharp as
+// the real frames): PSNR rewards the blur of a mean prediction, and this shows what that blur costs.
+double edge_energy(const torch::Tensor& frames);
 // Frames at `factor` times the rate of `key` [N, ...] by linear blending of neighbouring key frames -> [(N - 1) factor
 // + 1, ...]; the key frames are kept. A frame-by-frame decoder that gets tokens only at the token rate (6.25 Hz)
 // reaches 25 Hz this way: the baseline the video decoder's upsampling must beat.

@@ -8,9 +8,10 @@
 namespace gaia::decoder {
 
 torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
-                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn) {
+                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn, double start) {
   if (steps < 1) fail("decoder: DDIM needs at least 1 step, got {}", steps);
-  auto times = ddim_times(steps);
+  if (!(start > 0 && start <= 1)) fail("decoder.start_time must be in (0, 1], got {}", start);
+  auto times = ddim_times(steps, start);
   auto opt = torch::TensorOptions().dtype(torch::kFloat64);
   for (int i = 0; i < steps; ++i) {
     const double t = times[size_t(i)], s = times[size_t(i) + 1];
@@ -42,6 +43,7 @@ SampleOptions sample_options(const DecoderConfig& cfg, int steps, uint64_t seed)
   o.mix_weight = cfg.mix_weight;
   o.noise_correlation = cfg.noise_correlation;
   o.noise_scale = cfg.noise_scale;
+  o.start_time = cfg.start_time;
   o.seed = seed;
   return o;
 }
@@ -60,7 +62,13 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
   if (!(o.noise_scale >= 0 && o.noise_scale <= 1)) fail("decoder.noise_scale must be in [0, 1], got {}", o.noise_scale);
-  auto z = (o.noise_scale * starting_noise(x0.sizes(), o.noise_correlation, gen)).to(x0.options());
+  if (!(o.start_time > 0 && o.start_time <= 1)) fail("decoder.start_time must be in (0, 1], got {}", o.start_time);
+  if (o.start_time < 1 && !cond_image.defined())
+    fail("decoder.start_time < 1 needs decoder.cond_image (the coarse frame the sampler starts from)");
+  // z at the start time for a zero residual: sigma(start) n (sigma(1) is 1 to 1e-7; the paper's start uses n as is).
+  const double sigma_start =
+      o.start_time < 1 ? sched.sigma(torch::tensor({o.start_time}, torch::kFloat64)).item<double>() : 1.0;
+  auto z = (sigma_start * o.noise_scale * starting_noise(x0.sizes(), o.noise_correlation, gen)).to(x0.options());
   std::mt19937_64 rng(o.seed ^ 0x9e3779b97f4a7c15ULL);
   std::bernoulli_distribution mix(o.mix_probability);
   DenoiserInput di;
@@ -84,7 +92,7 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
     }
     return v;
   };
-  z = ddim_loop(z, o.steps, sched, v_fn);
+  z = ddim_loop(z, o.steps, sched, v_fn, o.start_time);
   return (ctx * in.frames + (1 - ctx) * (z + base)).clamp(-1, 1);
 }
 

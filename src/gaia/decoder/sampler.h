@@ -13,10 +13,10 @@
 
 namespace gaia::decoder {
 
-// The deterministic DDIM loop from pure noise z (at t = 1) to t = 0 over `steps` uniform steps. v_fn(z, t) returns
-// the v prediction at time t. Generic so that a test can run it with an analytic denoiser.
+// The deterministic DDIM loop from z at time `start` (1 = pure noise) to t = 0 over `steps` uniform steps. v_fn(z, t)
+// returns the v prediction at time t. Generic so that a test can run it with an analytic denoiser.
 torch::Tensor ddim_loop(torch::Tensor z, int steps, const NoiseSchedule& sched,
-                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn);
+                        const std::function<torch::Tensor(const torch::Tensor&, double)>& v_fn, double start = 1.0);
 
 struct SampleOptions {
   int steps = 50;                // §5.2: 50 DDIM steps
@@ -33,6 +33,12 @@ struct SampleOptions {
   // plus the draw's own spread, and the spread is drawn anew in every frame (flicker). 1 = the paper's sampler,
   // 0 = the deterministic path from z_T = 0. Sampling only; training is unchanged.
   double noise_scale = 1.0;
+  // The time DDIM starts from. 1 = the paper's sampler (z_1 is pure noise). Below 1 the window starts at
+  // z = sigma(start) s n, i.e. a zero residual over the coarse frame noised to that level (SDEdit, Meng et al.
+  // 2022): the coarse frame's content is kept and only detail finer than the noise level is redrawn, so fewer
+  // model calls are spent on what the tokens already fix. Every generated frame needs a coarse frame
+  // (cond_image, and interp_base for frames without tokens); the frame itself would otherwise start from grey.
+  double start_time = 1.0;
   uint64_t seed = 0;
 };
 
