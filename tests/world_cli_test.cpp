@@ -69,6 +69,32 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
   EXPECT_GT(j["bits_per_token"]["zstd"].get<double>(), 0);
   EXPECT_EQ(j["perplexity_by_position"].size(), 32u);
   EXPECT_TRUE(fs::exists(p.dir / "eval" / "perplexity_by_position.svg"));
+  // Fig. 5 by default: argmax, the config's top-k and the whole distribution, each drawing the last frame of
+  // held-out windows, against the real last frames. Argmax takes the most likely token at every position, so the
+  // model finds its draws far likelier than real tokens or full samples, and it copies the frame before most.
+  const auto& lf = j["last_frame"];
+  ASSERT_EQ(lf["strategies"].size(), 3u) << lf.dump();
+  EXPECT_EQ(lf["strategies"][0]["strategy"], "argmax");
+  EXPECT_EQ(lf["strategies"][1]["top_k"], gaia::Config().world.top_k);
+  EXPECT_EQ(lf["strategies"][2]["top_k"], 0);
+  const double argmax_nats = lf["strategies"][0]["mean_nats"], sample_nats = lf["strategies"][2]["mean_nats"];
+  EXPECT_LT(argmax_nats, lf["real"]["mean_nats"].get<double>() - 0.5) << lf.dump();
+  EXPECT_LT(argmax_nats, sample_nats - 0.5) << lf.dump();
+  EXPECT_EQ(lf["real"]["perplexity_by_position"].size(), 32u);
+  EXPECT_GE(lf["strategies"][0]["copy_rate"].get<double>(), lf["strategies"][2]["copy_rate"].get<double>());
+  EXPECT_TRUE(fs::exists(p.dir / "eval" / "perplexity_by_strategy.svg"));
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                     " --max-windows 2 --top-k-sweep 4,0 --sweep-windows 1 --out " + q(p.dir / "eval-sweep"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto js = nlohmann::json::parse(read_file(p.dir / "eval-sweep" / "eval.json"));
+  EXPECT_EQ(js["last_frame"]["windows"], 1);
+  ASSERT_EQ(js["last_frame"]["strategies"].size(), 2u);
+  EXPECT_EQ(js["last_frame"]["strategies"][0]["strategy"], "top-k, k = 4");
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                     " --top-k-sweep 1,-2 --out " + q(p.dir / "eval-bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--top-k-sweep: k must be in [0, 256]"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "eval-bad" / "eval.json"));
 
   // Two futures steered left from an episode prompt, with text and guidance, decoded into a preview.
   r = test::run_gaia("generate --world " + q(p.run / "world.safetensors") + " --tokenizer " + q(p.tok / "tokenizer.safetensors") +
@@ -250,10 +276,18 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_EQ(j["temperature"].get<double>(), 1.0);  // the world model's config
 
   // --set world.temperature reaches the sampler: the same long rollout, sharper distributions, other tokens.
-  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --out " +
-                     q(p.dir / "eval-cold"));
+  // With --world-eval the likelihood figures and both Fig. 5 plots join the report.
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                     " --max-windows 2 --sweep-windows 1 --out " + q(p.dir / "world-eval"));
   ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --world-eval " +
+                     q(p.dir / "world-eval") + " --out " + q(p.dir / "eval-cold"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"plots/perplexity_by_position.svg", "plots/perplexity_by_strategy.svg"})
+    EXPECT_TRUE(fs::exists(p.dir / "eval-cold" / f)) << f;
+  EXPECT_NE(read_file(p.dir / "eval-cold" / "report.html").find("the last frame drawn by argmax"), std::string::npos);
   auto cold = nlohmann::json::parse(read_file(p.dir / "eval-cold" / "eval.json"));
+  EXPECT_EQ(cold["world_model"]["last_frame"]["strategies"].size(), 3u);
   EXPECT_EQ(cold["temperature"].get<double>(), 0.3);
   EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
 

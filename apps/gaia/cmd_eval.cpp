@@ -139,10 +139,15 @@ void register_eval(CLI::App& app) {
                             {"text", "Held-out cross-entropy of the image tokens, against xz -9 and zstd -19 on the "
                                      "same token stream, and with the conditioning shuffled across examples."},
                             {"metrics", wj}};
-      if (fs::exists(we / "perplexity_by_position.svg")) {
-        out.text("plots/perplexity_by_position.svg", read_file(we / "perplexity_by_position.svg"));
-        sec["plots"] = {{{"caption", "perplexity by token position (Fig. 5)"}, {"path", "plots/perplexity_by_position.svg"}}};
-      }
+      sec["plots"] = nlohmann::json::array();
+      for (auto [file, caption] : {std::pair{"perplexity_by_position.svg", "perplexity by token position (Fig. 5)"},
+                                   std::pair{"perplexity_by_strategy.svg",
+                                             "the last frame drawn by argmax, top-k and full sampling against the "
+                                             "real one, perplexity by position (Fig. 5)"}})
+        if (fs::exists(we / file)) {
+          out.text(std::string("plots/") + file, read_file(we / file));
+          sec["plots"].push_back({{"caption", caption}, {"path", std::string("plots/") + file}});
+        }
       out.sections.insert(out.sections.begin(), sec);
     }
     if (!e->metrics.empty() || !e->plots.empty()) {

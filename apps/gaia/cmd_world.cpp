@@ -61,9 +61,16 @@ void register_world(CLI::App& app) {
     auto flags = std::make_shared<SharedFlags>();
     auto tokens = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     auto max_windows = std::make_shared<size_t>(256);
+    auto sweep = std::make_shared<std::vector<int>>();
+    auto sweep_windows = std::make_shared<size_t>(64);
     cmd->add_option("TOKENS", *tokens, "token dataset (its validation episodes are scored)")->required();
     cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
     cmd->add_option("--max-windows", *max_windows, "held-out windows of T steps to score");
+    cmd->add_option("--top-k-sweep", *sweep,
+                    "Fig. 5 strategies: k values for top-k sampling of each window's last frame, scored like real "
+                    "tokens (1 = argmax, 0 = the whole distribution; default: 1, world.top_k, 0)")
+        ->delimiter(',');
+    cmd->add_option("--sweep-windows", *sweep_windows, "held-out windows whose last frame each strategy generates");
     add_shared_flags(cmd, flags.get(), "output directory (eval.json, perplexity_by_position.svg)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);
@@ -83,7 +90,11 @@ void register_world(CLI::App& app) {
       if (windows.empty()) fail("{}: no held-out window of {} steps to score", *tokens, info.config.world.context_steps);
       const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
       nlohmann::json j = {{"tokens", *tokens}, {"world", *weights}, {"windows", windows.size()}};
-      ProgressBar bar(5, "world eval");
+      std::vector<int> ks = sweep->empty() ? std::vector<int>{1, info.config.world.top_k, 0} : *sweep;
+      for (int k : ks)
+        if (k < 0 || k > info.K) fail("--top-k-sweep: k must be in [0, {}] (0 = the whole distribution), got {}", info.K, k);
+      if (*sweep_windows < 1) fail("--sweep-windows must be >= 1");
+      ProgressBar bar(int64_t(6 + ks.size()), "world eval");
       int done = 0;
       auto run_score = [&](world::Conditioning mode, bool shuffle) {
         world::ScoreOptions so;
@@ -99,7 +110,6 @@ void register_world(CLI::App& app) {
       auto txt = run_score(world::Conditioning::kText, false);
       auto txt_shuf = run_score(world::Conditioning::kText, true);
       auto unc = run_score(world::Conditioning::kUnconditional, false);
-      bar.finish();
       // The same held-out token stream (the scored windows, in order) through general-purpose compressors.
       std::vector<int16_t> stream;
       for (auto& w : windows) {
@@ -119,6 +129,41 @@ void register_world(CLI::App& app) {
       std::vector<double> ppl;
       for (double v : act.by_position) ppl.push_back(std::exp(v));
       j["perplexity_by_position"] = ppl;
+      // Fig. 5: the last frame of held-out windows, real and as each strategy draws it, scored by the model.
+      const auto few = std::vector<world::Window>(windows.begin(), windows.begin() + long(std::min(windows.size(), *sweep_windows)));
+      const int64_t batch = info.config.world.batch_size;
+      auto exp_all = [](const std::vector<double>& v) {
+        std::vector<double> e;
+        for (double x : v) e.push_back(std::exp(x));
+        return e;
+      };
+      auto real_last = world::score_last_frame(model, ds, few, std::nullopt, batch, info.config.run.seed);
+      bar.update(++done);
+      std::vector<eval::Series> lines{{"real tokens", exp_all(real_last.by_position), ""}};
+      nlohmann::json strategies = nlohmann::json::array();
+      for (int k : ks) {
+        world::SamplingOptions so;
+        so.temperature = info.config.world.temperature;
+        so.strategy = k == 1 ? world::Strategy::Argmax : k == 0 ? world::Strategy::Sample : world::Strategy::TopK;
+        so.top_k = k;
+        const std::string name = k == 1 ? "argmax" : k == 0 ? "sample (whole distribution)" : fmt::format("top-k, k = {}", k);
+        auto g = world::score_last_frame(model, ds, few, so, batch, info.config.run.seed);
+        bar.update(++done);
+        // How far the draws' per-position perplexity is from the real tokens': mean |log ppl_gen - log ppl_real|.
+        double gap = 0;
+        for (size_t i = 0; i < g.by_position.size(); ++i) gap += std::abs(g.by_position[i] - real_last.by_position[i]);
+        gap /= double(g.by_position.size());
+        strategies.push_back({{"strategy", name}, {"top_k", k}, {"perplexity_by_position", exp_all(g.by_position)},
+                              {"mean_nats", g.nats}, {"log_perplexity_gap", gap}, {"copy_rate", g.copy_rate}});
+        lines.push_back({name, exp_all(g.by_position), ""});
+      }
+      bar.finish();
+      j["last_frame"] = {{"windows", few.size()},
+                         {"temperature", info.config.world.temperature},
+                         {"real", {{"perplexity_by_position", exp_all(real_last.by_position)},
+                                   {"mean_nats", real_last.nats},
+                                   {"copy_rate", real_last.copy_rate}}},
+                         {"strategies", strategies}};
       std::printf("%s\n", j.dump(2).c_str());
       if (!flags->out.empty()) {
         fs::create_directories(flags->out);
@@ -128,6 +173,9 @@ void register_world(CLI::App& app) {
         auto svg = eval::svg_lines("Perplexity by token position within a frame (Fig. 5)", xs,
                                    {{"real tokens (action-conditioned)", ppl, ""}}, "token position", "perplexity");
         write_file_atomic(fs::path(flags->out) / "perplexity_by_position.svg", svg);
+        write_file_atomic(fs::path(flags->out) / "perplexity_by_strategy.svg",
+                          eval::svg_lines("Perplexity of the generated frame's tokens by position (Fig. 5)", xs, lines,
+                                          "token position", "perplexity"));
       }
     });
   }

@@ -2,6 +2,9 @@
 
 #include <cmath>
 
+#include "gaia/core/error.h"
+#include "gaia/world/rollout.h"
+
 namespace gaia::world {
 
 double Score::bits() const { return nats / std::log(2.0); }
@@ -54,6 +57,49 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
   const double per_pos = double(s.tokens) / double(n);
   for (int64_t i = 0; i < n; ++i) s.by_position[size_t(i)] = sum_pos[i].item<double>() / per_pos;
   s.nats = sum_pos.sum().item<double>() / double(s.tokens);
+  return s;
+}
+
+LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
+                                const std::optional<SamplingOptions>& sampling, int64_t batch, uint64_t seed) {
+  torch::NoGradGuard ng;
+  model->eval();
+  const auto dev = model->token_embedding->weight.device();
+  const int64_t n = model->layout.n;
+  LastFrameScore s;
+  auto sum_pos = torch::zeros({n}, torch::kDouble);
+  int64_t frames = 0, copied = 0;
+  for (size_t b0 = 0; b0 < windows.size(); b0 += size_t(batch)) {
+    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
+    std::mt19937_64 rng(b0);
+    WorldBatch b = ds.make_batch(ws, nullptr, model->layout.m, only(Conditioning::kAction), rng);
+    const int64_t B = b.batch(), T = b.steps();
+    if (T < 2) fail("score_last_frame: windows need at least 2 steps, got {}", T);
+    if (sampling) {  // replace the last frame by the model's own draw
+      RolloutPrompt p;
+      p.tokens = b.tokens.narrow(1, 0, T - 1);  // [B, T - 1, n] one prompt per future
+      p.actions = b.actions;                    // [B, T, 2]
+      RolloutOptions ro;
+      ro.frames = 1;
+      ro.futures = int(B);
+      ro.sampling = *sampling;
+      ro.seed = seed + b0;
+      auto r = rollout(model, p, ro);
+      b.tokens = b.tokens.clone();
+      b.tokens.select(1, T - 1).copy_(r.tokens.select(1, T - 1).to(b.tokens.device()));
+    }
+    auto logits = model->forward(b.to(dev)).select(1, T - 1);  // [B, n, K]
+    auto tok = b.tokens.select(1, T - 1).to(dev);               // [B, n]
+    auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);
+    sum_pos += nll.sum(0).to(torch::kCPU, torch::kDouble);
+    copied += (b.tokens.select(1, T - 1) == b.tokens.select(1, T - 2)).sum().item<int64_t>();
+    frames += B;
+  }
+  if (frames == 0) fail("score_last_frame: no window to score");
+  s.by_position.resize(size_t(n));
+  for (int64_t i = 0; i < n; ++i) s.by_position[size_t(i)] = sum_pos[i].item<double>() / double(frames);
+  s.nats = sum_pos.sum().item<double>() / double(frames * n);
+  s.copy_rate = double(copied) / double(frames * n);
   return s;
 }
 

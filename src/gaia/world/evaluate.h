@@ -4,7 +4,10 @@
 // and per position within the frame (the paper's Fig. 5).
 #include <vector>
 
+#include <optional>
+
 #include "gaia/world/model.h"
+#include "gaia/world/sampling.h"
 #include "gaia/world/token_dataset.h"
 
 namespace gaia::world {
@@ -24,6 +27,20 @@ struct Score {
 
 Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
             const ScoreOptions& o);
+
+// Fig. 5: what a sampling strategy generates, scored like real tokens. The last frame of each window is generated
+// (`sampling`) from the window's T - 1 real frames before it, with its actions, and then scored by teacher forcing
+// with the same conditioning, so its per-position cross-entropy is what the model thought of its own draws; with
+// `sampling` unset the window's real last frame is scored the same way (the reference the strategies are held
+// against: §5.1 chooses k so that generated tokens look like real ones to the model). Also the copy rate of that
+// frame: the fraction of its tokens equal to the frame before at the same position.
+struct LastFrameScore {
+  std::vector<double> by_position;  // [n] mean cross-entropy (nats) of the i-th token of the last frame
+  double nats = 0;                  // their mean
+  double copy_rate = 0;
+};
+LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
+                                const std::optional<SamplingOptions>& sampling, int64_t batch, uint64_t seed);
 
 // Evenly spaced windows of `T` steps from the given episodes, at most `max_windows` (fixed, for validation).
 std::vector<Window> validation_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
