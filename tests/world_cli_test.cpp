@@ -83,6 +83,15 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
   EXPECT_EQ(lf["real"]["perplexity_by_position"].size(), 32u);
   EXPECT_GE(lf["strategies"][0]["copy_rate"].get<double>(), lf["strategies"][2]["copy_rate"].get<double>());
   EXPECT_TRUE(fs::exists(p.dir / "eval" / "perplexity_by_strategy.svg"));
+  // Steering sensitivity: every scored frame after the first of a window falls in one turn bucket (no NaN actions
+  // here); an untrained model's rises are small either way.
+  const auto& ss = j["steering_sensitivity"];
+  int64_t bucketed = 0;
+  for (const char* k : {"left", "right", "straight"}) {
+    bucketed += ss[k]["frames"].get<int64_t>();
+    EXPECT_LT(std::abs(ss[k]["curvature_mirrored_rise_nats"].get<double>()), 1.0) << ss.dump();
+  }
+  EXPECT_EQ(bucketed, j["windows"].get<int64_t>() * (4 - 1)) << ss.dump();  // configs/tiny.yaml: context_steps 4
   r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
                      " --max-windows 2 --top-k-sweep 4,0 --sweep-windows 1 --out " + q(p.dir / "eval-sweep"));
   ASSERT_EQ(r.status, 0) << r.output;

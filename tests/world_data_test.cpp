@@ -17,6 +17,8 @@
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/evaluate.h"
+#include "gaia/world/model.h"
 #include "gaia/world/token_dataset.h"
 #include "test_util.h"
 
@@ -469,4 +471,46 @@ TEST(WorldData, TokenizeCopiesTheSourceSplit) {
   std::string err = test::error_of(
       [&] { tokenizer::tokenize_dataset(dir / "ds", dir / "tok.safetensors", dir / "tokens", 6.25, torch::kCPU); });
   EXPECT_NE(err.find((dir / "ds" / "split.json").string()), std::string::npos) << err;
+}
+
+// Steering sensitivity buckets each frame by the curvature of the step before it, and measures only what the
+// curvature actions change: with the curvature projection's weight at zero the model cannot see the curvature, and
+// zeroing or mirroring it changes nothing; with a weight it does.
+TEST(WorldEval, SteeringSensitivityBucketsFramesByTheTurnBeforeThem) {
+  test::TempDir dir;
+  fs::path root = dir / "tokens";
+  write_header(root);
+  EpisodeSpec e{"e0", 12, "clear", 0};
+  // left (+0.01), right (-0.01), straight (0.001), one missing curvature at step 6
+  e.action = [](int64_t t) { return std::make_pair(5.0f, t == 6 ? kNaN : t % 3 == 0 ? 0.01f : t % 3 == 1 ? -0.01f : 0.001f); };
+  write_episode(root, e);
+  TokenDataset ds(root);
+  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");  // T = 4
+  auto windows = ds.windows({0}, c.world.context_steps, c.world.context_steps);  // steps 0-3, 4-7, 8-11
+  ASSERT_EQ(windows.size(), 3u);
+  torch::manual_seed(5);
+  world::WorldModel m(c.world, kN, kK);
+  {
+    torch::NoGradGuard ng;
+    m->curvature_proj->weight.zero_();
+  }
+  auto s = world::steering_sensitivity(m, ds, windows, 2);
+  // Frames t = 1..3 of each window follow steps t - 1 = 0..2: window 0 -> steps 0, 1, 2 (left, right, straight),
+  // window 1 -> steps 4, 5, 6 (right, straight, missing), window 2 -> steps 8, 9, 10 (straight, left, right).
+  EXPECT_EQ(s.left.frames, 2);
+  EXPECT_EQ(s.right.frames, 3);
+  EXPECT_EQ(s.straight.frames, 3);
+  for (const auto* r : {&s.left, &s.right, &s.straight}) {
+    EXPECT_GT(r->nats, 0.0);
+    EXPECT_NEAR(r->zeroed_rise, 0.0, 1e-9);
+    EXPECT_NEAR(r->mirrored_rise, 0.0, 1e-9);
+  }
+  {
+    torch::NoGradGuard ng;
+    m->curvature_proj->weight.normal_(0, 5.0);
+  }
+  auto t = world::steering_sensitivity(m, ds, windows, 2);
+  EXPECT_EQ(t.left.frames, 2);
+  EXPECT_TRUE(std::isfinite(t.left.nats));
+  EXPECT_GT(std::abs(t.left.mirrored_rise) + std::abs(t.right.mirrored_rise), 1e-4);
 }

@@ -94,7 +94,7 @@ void register_world(CLI::App& app) {
       for (int k : ks)
         if (k < 0 || k > info.K) fail("--top-k-sweep: k must be in [0, {}] (0 = the whole distribution), got {}", info.K, k);
       if (*sweep_windows < 1) fail("--sweep-windows must be >= 1");
-      ProgressBar bar(int64_t(6 + ks.size()), "world eval");
+      ProgressBar bar(int64_t(7 + ks.size()), "world eval");
       int done = 0;
       auto run_score = [&](world::Conditioning mode, bool shuffle) {
         world::ScoreOptions so;
@@ -126,6 +126,16 @@ void register_world(CLI::App& app) {
                              {"ratio_best_compressor_over_model", floor / act.bits()}};
       j["conditioning_used"] = {{"action_shuffled_minus_true_nats", act_shuf.nats - act.nats},
                                 {"text_shuffled_minus_true_nats", txt_shuf.nats - txt.nats}};
+      auto steer = world::steering_sensitivity(model, ds, windows, info.config.world.batch_size);
+      bar.update(++done);
+      auto steer_row = [](const world::SteeringSensitivity::Row& r) {
+        return nlohmann::json{{"frames", r.frames}, {"nats", r.nats}, {"curvature_zeroed_rise_nats", r.zeroed_rise},
+                              {"curvature_mirrored_rise_nats", r.mirrored_rise}};
+      };
+      j["steering_sensitivity"] = {{"threshold_per_m", 0.004},
+                                   {"left", steer_row(steer.left)},
+                                   {"right", steer_row(steer.right)},
+                                   {"straight", steer_row(steer.straight)}};
       std::vector<double> ppl;
       for (double v : act.by_position) ppl.push_back(std::exp(v));
       j["perplexity_by_position"] = ppl;

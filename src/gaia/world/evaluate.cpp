@@ -103,6 +103,54 @@ LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const
   return s;
 }
 
+SteeringSensitivity steering_sensitivity(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
+                                         int64_t batch, double threshold) {
+  torch::NoGradGuard ng;
+  model->eval();
+  const auto dev = model->token_embedding->weight.device();
+  std::vector<torch::Tensor> base, zeroed, mirrored, curv;
+  for (size_t b0 = 0; b0 < windows.size(); b0 += size_t(batch)) {
+    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
+    std::mt19937_64 rng(b0);
+    WorldBatch b = ds.make_batch(ws, nullptr, model->layout.m, only(Conditioning::kAction), rng);
+    auto tok = b.tokens.to(dev);
+    auto frame_nll = [&](const torch::Tensor& actions) {  // -> [B, T] mean over the frame's tokens
+      WorldBatch x = b;
+      x.actions = actions;
+      auto logits = model->forward(x.to(dev));
+      auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);
+      return nll.mean(-1).to(torch::kCPU, torch::kDouble);
+    };
+    auto c = b.actions.select(2, 1);
+    auto a0 = b.actions.clone(), am = b.actions.clone();
+    a0.select(2, 1).copy_(torch::where(torch::isnan(c), c, torch::zeros_like(c)));  // NaN stays missing
+    am.select(2, 1).copy_(-c);
+    base.push_back(frame_nll(b.actions));
+    zeroed.push_back(frame_nll(a0));
+    mirrored.push_back(frame_nll(am));
+    curv.push_back(c.to(torch::kDouble) * kCurvatureScale);
+  }
+  SteeringSensitivity s;
+  if (base.empty()) return s;
+  // Frame t >= 1 follows the action of step t - 1.
+  auto after = [](const std::vector<torch::Tensor>& v) { return torch::cat(v).slice(1, 1); };
+  auto n = after(base), z = after(zeroed), m = after(mirrored);
+  auto c = torch::cat(curv).slice(1, 0, -1);
+  auto row = [&](const torch::Tensor& sel) {
+    SteeringSensitivity::Row r;
+    r.frames = sel.sum().item<int64_t>();
+    if (r.frames == 0) return r;
+    r.nats = n.masked_select(sel).mean().item<double>();
+    r.zeroed_rise = (z - n).masked_select(sel).mean().item<double>();
+    r.mirrored_rise = (m - n).masked_select(sel).mean().item<double>();
+    return r;
+  };
+  s.left = row(c > threshold);
+  s.right = row(c < -threshold);
+  s.straight = row(c.abs() <= threshold);  // NaN compares false: left out
+  return s;
+}
+
 std::vector<Window> validation_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
                                        size_t max_windows) {
   auto all = ds.windows(episodes, T, T);  // non-overlapping

@@ -42,6 +42,20 @@ struct LastFrameScore {
 LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
                                 const std::optional<SamplingOptions>& sampling, int64_t batch, uint64_t seed);
 
+// Does the model use the curvature actions, and as much for right turns as for left ones? The rise of the
+// image tokens' cross-entropy (nats per token) when every curvature action of the windows is set to 0 or mirrored
+// (-c), over the frames that follow a step turning left (curvature > threshold, 1/m), right (< -threshold) or
+// neither. Frames after a missing action are left out.
+struct SteeringSensitivity {
+  struct Row {
+    int64_t frames = 0;
+    double nats = 0, zeroed_rise = 0, mirrored_rise = 0;
+  };
+  Row left, right, straight;
+};
+SteeringSensitivity steering_sensitivity(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
+                                         int64_t batch, double threshold = 0.004);
+
 // Evenly spaced windows of `T` steps from the given episodes, at most `max_windows` (fixed, for validation).
 std::vector<Window> validation_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
                                        size_t max_windows);
