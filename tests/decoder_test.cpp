@@ -594,6 +594,33 @@ TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
   EXPECT_FALSE(back.decoder.interp_base);
 }
 
+// Decoder files from before decoder.start_time: with a coarse frame they take the default start; a decoder without
+// one (the paper's setting) starts from pure noise, since nothing else is there to start from.
+TEST(DecoderResidual, OldDecoderFilesTakeAStartTheyCanUse) {
+  test::TempDir dir;
+  Config back;
+  for (bool cond : {true, false}) {
+    Config c = tiny();
+    c.decoder.cond_image = cond;
+    c.decoder.interp_base = cond;
+    c.decoder.start_time = cond ? 0.7 : 1.0;
+    VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+    save_decoder(m, c, dir.path / "new.safetensors");
+    load_decoder(dir.path / "new.safetensors", torch::kCPU, &back);
+    EXPECT_EQ(back.decoder.start_time, c.decoder.start_time);  // saved now: kept
+    std::string yaml = c.to_yaml(), old;
+    std::istringstream lines(yaml);
+    for (std::string l; std::getline(lines, l);)
+      if (l.find("start_time") == std::string::npos) old += l + "\n";
+    ASSERT_NE(old, yaml);
+    save_module(*m, dir.path / "old.safetensors",
+                {{"gaia.component", "decoder"}, {"gaia.config", old}, {"gaia.decoder.K", std::to_string(m->K)},
+                 {"gaia.decoder.D", std::to_string(m->D)}});
+    load_decoder(dir.path / "old.safetensors", torch::kCPU, &back);
+    EXPECT_EQ(back.decoder.start_time, cond ? Config().decoder.start_time : 1.0) << "cond_image " << cond;
+  }
+}
+
 // decoder.noise_correlation: each frame's starting noise stays N(0, I), any two frames of a window are correlated
 // by r, windows of a batch stay independent, and r = 0 is the plain draw (so earlier samples are unchanged).
 TEST(DecoderSampler, StartingNoiseCorrelatesTheFramesOfAWindow) {
@@ -705,7 +732,8 @@ TEST(DecoderSampler, StartTimeRefinesTheCoarseFrame) {
   NoiseSchedule sch;
   auto o = sample_options(c.decoder, 3, 11);
   EXPECT_EQ(o.start_time, c.decoder.start_time);  // the config's
-  EXPECT_EQ(o.start_time, 1.0);                   // the paper's sampler by default
+  EXPECT_LT(o.start_time, 1.0);                   // the CPU default refines the coarse frame ...
+  EXPECT_EQ(Config::load(test::source_dir() / "configs" / "paper.yaml").decoder.start_time, 1.0);  // ... the paper's does not
   o.mix_probability = 0;
   o.noise_scale = 0.5;  // keeps the samples inside the clamp to [-1, 1]
   const auto base = w.cond_image.clamp(-1, 1);

@@ -25,7 +25,12 @@ VideoUNet load_decoder(const fs::path& path, const torch::Device& device, Config
     // Decoders saved before decoder.interp_base existed were trained with zero coarse frames between known ones:
     // their metadata has no such key, so the value set here stays; newer files set it themselves.
     c.decoder.interp_base = false;
+    // Files saved before decoder.start_time existed have no such key: they take the default start, except a
+    // decoder without a coarse frame (the paper's setting), which can only start from pure noise.
+    const double default_start = c.decoder.start_time;
+    c.decoder.start_time = -1;
     c.apply_yaml(md["gaia.config"], path.string() + " [metadata]");
+    if (c.decoder.start_time == -1) c.decoder.start_time = c.decoder.cond_image ? default_start : 1.0;
     c.validate();
     try {
       K = std::stoll(md["gaia.decoder.K"]);
