@@ -269,6 +269,15 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   const auto& lr = j["long_rollout"];
   EXPECT_EQ(lr["frames"].get<int>(), 13);  // 2 s at 6.25 Hz, rounded
   EXPECT_EQ(lr["windows"].size(), 2u);     // two 1 s windows of 6 frames
+  // The real windows' own spread: ordered percentiles around the mean, a fraction of them within 10% of it.
+  EXPECT_GE(lr["real_windows"].get<int>(), 1);
+  for (const char* k : {"real_copy_rate_spread", "real_entropy_bits_spread"}) {
+    const auto& s = lr[k];
+    EXPECT_LE(s["p10"].get<double>(), s["p50"].get<double>()) << k;
+    EXPECT_LE(s["p50"].get<double>(), s["p90"].get<double>()) << k;
+    EXPECT_GE(s["within_10_percent_of_mean"].get<double>(), 0.0) << k;
+    EXPECT_LE(s["within_10_percent_of_mean"].get<double>(), 1.0) << k;
+  }
   for (const auto& w : lr["windows"]) {
     EXPECT_GE(w["copy_rate"].get<double>(), 0.0);
     EXPECT_LE(w["entropy_bits"].get<double>(), 8.0 + 1e-9);  // K = 256

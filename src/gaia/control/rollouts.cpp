@@ -1,5 +1,6 @@
 #include "gaia/control/rollouts.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "gaia/core/error.h"
@@ -124,10 +125,23 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   auto real = real_reference(m, ds, W, 256, m.info.config.run.seed);
   if (real.windows.empty()) fail("{}: no held-out episode is {} s long (the statistics window)", ds.path().string(), o.window_seconds);
   double real_copy = 0, real_entropy = 0;
+  std::vector<double> real_copies, real_entropies;
   for (auto& w : real.windows) {
-    real_copy += copy_rate(w) / double(real.windows.size());
-    real_entropy += unigram_entropy_bits(w, m.info.K) / double(real.windows.size());
+    real_copies.push_back(copy_rate(w));
+    real_entropies.push_back(unigram_entropy_bits(w, m.info.K));
+    real_copy += real_copies.back() / double(real.windows.size());
+    real_entropy += real_entropies.back() / double(real.windows.size());
   }
+  // How much real windows themselves vary: the 10th / 50th / 90th percentile of each statistic over the real
+  // windows, and the fraction of real windows within 10% of the real mean (what the per-window target asks of a
+  // generated window, asked of real video).
+  auto spread = [](std::vector<double> v, double mean) {
+    std::sort(v.begin(), v.end());
+    auto q = [&](double f) { return v[size_t(std::lround(f * double(v.size() - 1)))]; };
+    double within = 0;
+    for (double x : v) within += std::abs(x / mean - 1) <= 0.10 ? 1.0 / double(v.size()) : 0.0;
+    return nlohmann::json{{"p10", q(0.1)}, {"p50", q(0.5)}, {"p90", q(0.9)}, {"within_10_percent_of_mean", within}};
+  };
   nlohmann::json windows = nlohmann::json::array();
   std::vector<double> xs;
   eval::Series s_copy{"copy rate (generated)", {}, ""}, s_copy_real{"copy rate (real)", {}, ""};
@@ -152,6 +166,9 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
                       {"generated_frames_per_second", double(F) / r.seconds},
                       {"real_copy_rate", real_copy},
                       {"real_entropy_bits", real_entropy},
+                      {"real_windows", real.windows.size()},
+                      {"real_copy_rate_spread", spread(real_copies, real_copy)},
+                      {"real_entropy_bits_spread", spread(real_entropies, real_entropy)},
                       {"windows", windows},
                       {"max_relative_difference", worst},
                       {"within_10_percent", worst <= 0.10}};
