@@ -572,6 +572,18 @@ TEST(DecoderResidual, SamplerStartsInBetweenFramesFromTheBlend) {
   }
 }
 
+// A decoder file as saved before the config key `key` existed: its metadata's config lacks that line.
+void save_without_key(VideoUNet& m, Config& c, const std::string& key, const fs::path& path) {
+  std::string yaml = c.to_yaml(), old;
+  std::istringstream lines(yaml);
+  for (std::string l; std::getline(lines, l);)
+    if (l.find(key) == std::string::npos) old += l + "\n";
+  ASSERT_NE(old, yaml) << key;
+  save_module(*m, path,
+              {{"gaia.component", "decoder"}, {"gaia.config", old}, {"gaia.decoder.K", std::to_string(m->K)},
+               {"gaia.decoder.D", std::to_string(m->D)}});
+}
+
 // Decoder files from before decoder.interp_base were trained with zero coarse frames between known ones: they load
 // with it off; files saved now keep what they were trained with.
 TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
@@ -582,14 +594,7 @@ TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
   Config back;
   load_decoder(dir.path / "new.safetensors", torch::kCPU, &back);
   EXPECT_TRUE(back.decoder.interp_base);
-  std::string yaml = c.to_yaml(), old;
-  std::istringstream lines(yaml);
-  for (std::string l; std::getline(lines, l);)
-    if (l.find("interp_base") == std::string::npos) old += l + "\n";
-  ASSERT_NE(old, yaml);
-  save_module(*m, dir.path / "old.safetensors",
-              {{"gaia.component", "decoder"}, {"gaia.config", old}, {"gaia.decoder.K", std::to_string(m->K)},
-               {"gaia.decoder.D", std::to_string(m->D)}});
+  save_without_key(m, c, "interp_base", dir.path / "old.safetensors");
   load_decoder(dir.path / "old.safetensors", torch::kCPU, &back);
   EXPECT_FALSE(back.decoder.interp_base);
 }
@@ -608,14 +613,7 @@ TEST(DecoderResidual, OldDecoderFilesTakeAStartTheyCanUse) {
     save_decoder(m, c, dir.path / "new.safetensors");
     load_decoder(dir.path / "new.safetensors", torch::kCPU, &back);
     EXPECT_EQ(back.decoder.start_time, c.decoder.start_time);  // saved now: kept
-    std::string yaml = c.to_yaml(), old;
-    std::istringstream lines(yaml);
-    for (std::string l; std::getline(lines, l);)
-      if (l.find("start_time") == std::string::npos) old += l + "\n";
-    ASSERT_NE(old, yaml);
-    save_module(*m, dir.path / "old.safetensors",
-                {{"gaia.component", "decoder"}, {"gaia.config", old}, {"gaia.decoder.K", std::to_string(m->K)},
-                 {"gaia.decoder.D", std::to_string(m->D)}});
+    save_without_key(m, c, "start_time", dir.path / "old.safetensors");
     load_decoder(dir.path / "old.safetensors", torch::kCPU, &back);
     EXPECT_EQ(back.decoder.start_time, cond ? Config().decoder.start_time : 1.0) << "cond_image " << cond;
   }
@@ -679,25 +677,34 @@ TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
   EXPECT_GT((b.select(1, 0) - b.select(1, 4)).abs().mean().item<double>(), 0.01);
 }
 
+// A fresh model (v ~ 0: its output layer starts at zero, the rest does not) and a window of 5 frames to generate
+// whose coarse frames are a random input's scaled by 0.3, for the tests of the starting noise.
+struct FreshWindow {
+  Config c = tiny();
+  VideoUNet m{c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample};
+  WindowInput w;
+  NoiseSchedule sch;
+  FreshWindow() {
+    auto in = random_input(m, 1, 5, 32, 64, 8);
+    w = all_frames_generated(m, in);
+    w.cond_image = (in.cond_image * 0.3).contiguous();
+  }
+  torch::Tensor sample(const SampleOptions& o) { return sample_window(m, sch, w, o); }
+};
+
 // decoder.noise_scale: the temperature of the starting noise. With a fresh model (v ~ 0) DDIM is nearly linear in z_T,
 // so the residual over the coarse frame scales with the option; at 0 the sampler returns the coarse frame whatever
 // the seed.
 TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
-  Config c = tiny();
-  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v ~ 0
-  torch::NoGradGuard ng;
-  auto in = random_input(m, 1, 5, 32, 64, 8);
-  auto w = all_frames_generated(m, in);
-  w.cond_image = (in.cond_image * 0.3).contiguous();
-  NoiseSchedule sch;
-  auto o = sample_options(c.decoder, 3, 11);
-  EXPECT_EQ(o.noise_scale, c.decoder.noise_scale);  // the config's
+  FreshWindow f;
+  auto o = sample_options(f.c.decoder, 3, 11);
+  EXPECT_EQ(o.noise_scale, f.c.decoder.noise_scale);  // the config's
   o.noise_scale = 1;
   o.mix_probability = 0;
-  auto full = sample_window(m, sch, w, o);
+  auto full = f.sample(o);
   o.noise_scale = 0.5;
-  auto half = sample_window(m, sch, w, o);
-  const auto base = w.cond_image.clamp(-1, 1);
+  auto half = f.sample(o);
+  const auto base = f.w.cond_image.clamp(-1, 1);
   auto inside = (full.abs() < 0.999).logical_and(half.abs() < 0.999);  // away from the clamp
   ASSERT_GT(inside.sum().item<int64_t>(), 1000);
   auto r_full = (full - base).masked_select(inside), r_half = (half - base).masked_select(inside);
@@ -708,14 +715,14 @@ TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
   EXPECT_NEAR(ratio, 0.5, 0.05);
   EXPECT_GT(torch::cosine_similarity(r_half, r_full, 0).item<double>(), 0.95);
   o.noise_scale = 0;
-  auto zero = sample_window(m, sch, w, o);
+  auto zero = f.sample(o);
   o.seed = 12;
-  EXPECT_TRUE(torch::allclose(zero, sample_window(m, sch, w, o)));
+  EXPECT_TRUE(torch::allclose(zero, f.sample(o)));
   EXPECT_LT((zero - base).abs().max().item<double>(), 1e-6);
   o.noise_scale = 1.5;
-  EXPECT_NE(test::error_of([&] { sample_window(m, sch, w, o); }).find("decoder.noise_scale"), std::string::npos);
-  c.decoder.noise_scale = -0.1;
-  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_scale"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { f.sample(o); }).find("decoder.noise_scale"), std::string::npos);
+  f.c.decoder.noise_scale = -0.1;
+  EXPECT_NE(test::error_of([&] { f.c.validate(); }).find("decoder.noise_scale"), std::string::npos);
 }
 
 // decoder.start_time < 1 starts from the coarse frame noised to that level. With v = 0 every DDIM step multiplies z by
@@ -723,31 +730,26 @@ TEST(DecoderSampler, NoiseScaleIsTheTemperatureOfTheStartingNoise) {
 // sigma(t0) n times the product of those factors over the grid from t0: the residual follows the start's noise
 // level. Without a coarse frame a start below 1 is an error.
 TEST(DecoderSampler, StartTimeRefinesTheCoarseFrame) {
-  Config c = tiny();
-  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v ~ 0
-  torch::NoGradGuard ng;
-  auto in = random_input(m, 1, 5, 32, 64, 8);
-  auto w = all_frames_generated(m, in);
-  w.cond_image = (in.cond_image * 0.3).contiguous();
-  NoiseSchedule sch;
-  auto o = sample_options(c.decoder, 3, 11);
-  EXPECT_EQ(o.start_time, c.decoder.start_time);  // the config's
+  FreshWindow f;
+  auto o = sample_options(f.c.decoder, 3, 11);
+  EXPECT_EQ(o.start_time, f.c.decoder.start_time);  // the config's
   EXPECT_LT(o.start_time, 1.0);                   // the CPU default refines the coarse frame ...
   EXPECT_EQ(Config::load(test::source_dir() / "configs" / "paper.yaml").decoder.start_time, 1.0);  // ... the paper's does not
   o.mix_probability = 0;
   o.noise_scale = 0.5;  // keeps the samples inside the clamp to [-1, 1]
-  const auto base = w.cond_image.clamp(-1, 1);
+  const auto base = f.w.cond_image.clamp(-1, 1);
   auto sample = [&](double start) {
     o.start_time = start;
-    return sample_window(m, sch, w, o);
+    return f.sample(o);
   };
   auto at = [&](double t) { return torch::tensor({t}, torch::kFloat64); };
   auto v0_factor = [&](double start) {  // sigma(t0) prod (alpha_s alpha_t + sigma_s sigma_t)
     const auto g = ddim_times(3, start);
-    double f = start < 1 ? sch.sigma(at(start)).item<double>() : 1.0;
+    const NoiseSchedule& sch = f.sch;
+    double prod = start < 1 ? sch.sigma(at(start)).item<double>() : 1.0;
     for (size_t i = 0; i + 1 < g.size(); ++i)
-      f *= (sch.alpha(at(g[i])) * sch.alpha(at(g[i + 1])) + sch.sigma(at(g[i])) * sch.sigma(at(g[i + 1]))).item<double>();
-    return f;
+      prod *= (sch.alpha(at(g[i])) * sch.alpha(at(g[i + 1])) + sch.sigma(at(g[i])) * sch.sigma(at(g[i + 1]))).item<double>();
+    return prod;
   };
   const auto full = sample(1.0), half = sample(0.5), low = sample(0.2);
   auto inside = (full.abs() < 0.999).logical_and(half.abs() < 0.999).logical_and(low.abs() < 0.999);
@@ -759,12 +761,12 @@ TEST(DecoderSampler, StartTimeRefinesTheCoarseFrame) {
   EXPECT_NEAR(residual(low) / r1, v0_factor(0.2) / v0_factor(1.0), 0.05);
   EXPECT_LT(v0_factor(0.2) / v0_factor(1.0), 0.6);  // the test tells a start of 0.2 from one of 1
   o.start_time = 0.5;
-  auto no_cond = w;
+  auto no_cond = f.w;
   no_cond.cond_image = torch::Tensor();
-  EXPECT_NE(test::error_of([&] { sample_window(m, sch, no_cond, o); }).find("decoder.start_time"), std::string::npos);
-  c.decoder.start_time = 0;
-  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.start_time"), std::string::npos);
-  c.decoder.start_time = 0.5;
-  c.decoder.cond_image = false;
-  EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.cond_image"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { sample_window(f.m, f.sch, no_cond, o); }).find("decoder.start_time"), std::string::npos);
+  f.c.decoder.start_time = 0;
+  EXPECT_NE(test::error_of([&] { f.c.validate(); }).find("decoder.start_time"), std::string::npos);
+  f.c.decoder.start_time = 0.5;
+  f.c.decoder.cond_image = false;
+  EXPECT_NE(test::error_of([&] { f.c.validate(); }).find("decoder.cond_image"), std::string::npos);
 }
