@@ -139,7 +139,8 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
     std::sort(v.begin(), v.end());
     auto q = [&](double f) { return v[size_t(std::lround(f * double(v.size() - 1)))]; };
     double within = 0;
-    for (double x : v) within += std::abs(x / mean - 1) <= 0.10 ? 1.0 / double(v.size()) : 0.0;
+    for (double x : v)  // a zero mean (frozen real video) counts only the windows that are zero too
+      within += (mean > 0 ? std::abs(x / mean - 1) <= 0.10 : x == 0) ? 1.0 / double(v.size()) : 0.0;
     return nlohmann::json{{"p10", q(0.1)}, {"p50", q(0.5)}, {"p90", q(0.9)}, {"within_10_percent_of_mean", within}};
   };
   nlohmann::json windows = nlohmann::json::array();
