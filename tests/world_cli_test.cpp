@@ -243,6 +243,11 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_EQ(a["rollouts"].get<int>(), 2 * 8);  // prompts x commands
   EXPECT_EQ(a["guidance_scale"].get<double>(), 1.5);
   EXPECT_EQ(a["probe_frames"].get<int64_t>(), K);  // the read-back windows span the last prompt frame and all generated
+  for (auto it = a["per_command"].begin(); it != a["per_command"].end(); ++it) {  // one window here, its mean = the whole
+    const auto& w = it.value()["read_curvature_by_window"];
+    ASSERT_EQ(w.size(), 1u) << it.key();
+    EXPECT_NEAR(w[0].get<double>(), it.value()["read_curvature"].get<double>(), 1e-9) << it.key();
+  }
   for (const char* k : {"conditioned", "without_actions", "counterfactual_probe"})
     EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
   EXPECT_GT(a["counterfactual"]["psnr_db"].get<double>(), 5.0);

@@ -202,10 +202,13 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   eval::Series s_cmd{"commanded", {}, ""}, s_with{"world model", {}, ""}, s_null{"no action conditioning", {}, ""},
       s_truth{"counterfactual ground truth", {}, ""};
   nlohmann::json per = nlohmann::json::object();
+  const size_t W = rw.pair_read.size() / size_t(R);  // probe windows per rollout (the same for every rollout)
   for (int64_t c = 0; c < C; ++c) {
     double a = 0, b = 0, t = 0, cs = 0, rs = 0;
+    std::vector<double> by_window(W, 0.0);  // when in the rollout the turn is made (or given up)
     for (int i = 0; i < o.prompts; ++i) {
       const size_t r = size_t(i * C + c);
+      for (size_t k = 0; k < W; ++k) by_window[k] += rw.pair_read[r * W + k] / o.prompts;
       a += rw.curvature[r] / o.prompts;
       b += rn.curvature[r] / o.prompts;
       cs += cmd_speed[r] / o.prompts;
@@ -219,6 +222,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     s_null.y.push_back(b * 1000);
     s_truth.y.push_back(t * 1000);
     per[cmds[size_t(c)].name] = {{"commanded_curvature", cmd_curv[size_t(c)]}, {"read_curvature", a},
+                                 {"read_curvature_by_window", by_window},
                                  {"read_curvature_without_actions", b}, {"commanded_speed", cs}, {"read_speed", rs},
                                  {"out_of_distribution", cmds[size_t(c)].out_of_distribution}};
   }
