@@ -136,17 +136,16 @@ void register_world(CLI::App& app) {
                                    {"left", steer_row(steer.left)},
                                    {"right", steer_row(steer.right)},
                                    {"straight", steer_row(steer.straight)}};
-      std::vector<double> ppl;
-      for (double v : act.by_position) ppl.push_back(std::exp(v));
-      j["perplexity_by_position"] = ppl;
-      // Fig. 5: the last frame of held-out windows, real and as each strategy draws it, scored by the model.
-      const auto few = std::vector<world::Window>(windows.begin(), windows.begin() + long(std::min(windows.size(), *sweep_windows)));
-      const int64_t batch = info.config.world.batch_size;
       auto exp_all = [](const std::vector<double>& v) {
         std::vector<double> e;
         for (double x : v) e.push_back(std::exp(x));
         return e;
       };
+      const std::vector<double> ppl = exp_all(act.by_position);
+      j["perplexity_by_position"] = ppl;
+      // Fig. 5: the last frame of held-out windows, real and as each strategy draws it, scored by the model.
+      const auto few = std::vector<world::Window>(windows.begin(), windows.begin() + long(std::min(windows.size(), *sweep_windows)));
+      const int64_t batch = info.config.world.batch_size;
       auto real_last = world::score_last_frame(model, ds, few, std::nullopt, batch, info.config.run.seed);
       bar.update(++done);
       std::vector<eval::Series> lines{{"real tokens", exp_all(real_last.by_position), ""}};

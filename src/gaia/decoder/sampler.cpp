@@ -62,7 +62,6 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
   auto ctx = in.context.to(x0.dtype()).view({B, T, 1, 1, 1});
   auto gen = at::detail::createCPUGenerator(o.seed);
   if (!(o.noise_scale >= 0 && o.noise_scale <= 1)) fail("decoder.noise_scale must be in [0, 1], got {}", o.noise_scale);
-  if (!(o.start_time > 0 && o.start_time <= 1)) fail("decoder.start_time must be in (0, 1], got {}", o.start_time);
   if (o.start_time < 1 && !cond_image.defined())
     fail("decoder.start_time < 1 needs decoder.cond_image (the coarse frame the sampler starts from)");
   // z at the start time for a zero residual: sigma(start) n (sigma(1) is 1 to 1e-7; the paper's start uses n as is).

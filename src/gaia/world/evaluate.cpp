@@ -20,6 +20,20 @@ ConditioningMix only(Conditioning c) {
   return {};
 }
 
+// Cross-entropy of each image token under its logits: logits [..., K], tokens [...] -> nats [...] (float).
+torch::Tensor token_nll(const torch::Tensor& logits, const torch::Tensor& tokens) {
+  return -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tokens.unsqueeze(-1)).squeeze(-1);
+}
+
+// Windows [b0, b0 + batch) of `windows` -> their batch, with the conditioning mode drawn from rng(b0) (fixed, so a
+// window scores the same in every call).
+WorldBatch batch_at(const TokenDataset& ds, const std::vector<Window>& windows, size_t b0, int64_t batch,
+                    const text::Vocab* vocab, int64_t m, const ConditioningMix& mix) {
+  std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
+  std::mt19937_64 rng(b0);
+  return ds.make_batch(ws, vocab, m, mix, rng);
+}
+
 }  // namespace
 
 Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
@@ -34,13 +48,11 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
   const auto mix = only(o.mode);
   const size_t W = windows.size();
   for (size_t b0 = 0; b0 < W; b0 += static_cast<size_t>(o.batch)) {
-    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(W, b0 + size_t(o.batch))));
-    std::mt19937_64 rng(b0);
-    WorldBatch batch = ds.make_batch(ws, vocab, model->layout.m, mix, rng);
+    WorldBatch batch = batch_at(ds, windows, b0, o.batch, vocab, model->layout.m, mix);
     if (o.shuffle && W > 1) {
       // Conditioning from the window half the set away: a fixed derangement that pairs unrelated episodes.
       std::vector<Window> other;
-      for (size_t i = b0; i < b0 + ws.size(); ++i) other.push_back(windows[(i + W / 2) % W]);
+      for (size_t i = b0; i < b0 + size_t(batch.batch()); ++i) other.push_back(windows[(i + W / 2) % W]);
       std::mt19937_64 rng2(b0);
       WorldBatch c = ds.make_batch(other, vocab, model->layout.m, mix, rng2);
       batch.actions = c.actions;
@@ -49,7 +61,7 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
     }
     auto logits = model->forward(batch.to(dev));                             // [B, T, n, K]
     auto tok = batch.tokens.to(dev);
-    auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);  // [B,T,n]
+    auto nll = token_nll(logits, tok);  // [B, T, n]
     sum_pos += nll.sum(std::vector<int64_t>{0, 1}).to(torch::kCPU, torch::kDouble);
     s.tokens += nll.numel();
   }
@@ -70,9 +82,7 @@ LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const
   auto sum_pos = torch::zeros({n}, torch::kDouble);
   int64_t frames = 0, copied = 0;
   for (size_t b0 = 0; b0 < windows.size(); b0 += size_t(batch)) {
-    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
-    std::mt19937_64 rng(b0);
-    WorldBatch b = ds.make_batch(ws, nullptr, model->layout.m, only(Conditioning::kAction), rng);
+    WorldBatch b = batch_at(ds, windows, b0, batch, nullptr, model->layout.m, only(Conditioning::kAction));
     const int64_t B = b.batch(), T = b.steps();
     if (T < 2) fail("score_last_frame: windows need at least 2 steps, got {}", T);
     if (sampling) {  // replace the last frame by the model's own draw
@@ -90,7 +100,7 @@ LastFrameScore score_last_frame(WorldModel& model, const TokenDataset& ds, const
     }
     auto logits = model->forward(b.to(dev)).select(1, T - 1);  // [B, n, K]
     auto tok = b.tokens.select(1, T - 1).to(dev);               // [B, n]
-    auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);
+    auto nll = token_nll(logits, tok);
     sum_pos += nll.sum(0).to(torch::kCPU, torch::kDouble);
     copied += (b.tokens.select(1, T - 1) == b.tokens.select(1, T - 2)).sum().item<int64_t>();
     frames += B;
@@ -110,16 +120,13 @@ SteeringSensitivity steering_sensitivity(WorldModel& model, const TokenDataset& 
   const auto dev = model->token_embedding->weight.device();
   std::vector<torch::Tensor> base, zeroed, mirrored, curv;
   for (size_t b0 = 0; b0 < windows.size(); b0 += size_t(batch)) {
-    std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
-    std::mt19937_64 rng(b0);
-    WorldBatch b = ds.make_batch(ws, nullptr, model->layout.m, only(Conditioning::kAction), rng);
+    WorldBatch b = batch_at(ds, windows, b0, batch, nullptr, model->layout.m, only(Conditioning::kAction));
     auto tok = b.tokens.to(dev);
     auto frame_nll = [&](const torch::Tensor& actions) {  // -> [B, T] mean over the frame's tokens
       WorldBatch x = b;
       x.actions = actions;
       auto logits = model->forward(x.to(dev));
-      auto nll = -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tok.unsqueeze(-1)).squeeze(-1);
-      return nll.mean(-1).to(torch::kCPU, torch::kDouble);
+      return token_nll(logits, tok).mean(-1).to(torch::kCPU, torch::kDouble);
     };
     auto c = b.actions.select(2, 1);
     auto a0 = b.actions.clone(), am = b.actions.clone();
