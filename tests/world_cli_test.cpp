@@ -159,7 +159,7 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   EXPECT_NE(r.output.find("world.n_layers comes from the weights file"), std::string::npos) << r.output;
   r = test::run_gaia("generate" + w + " --frames 2 --set world.temperature=0.5 --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("here only world.top_k can be set"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("here only world.top_k, world.guide_actions_within_top_k can be set"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
   // ... but its sampling key reaches the sampler: with k = 1 two futures of one prompt are the same.
   r = test::run_gaia("generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2" +
@@ -297,13 +297,15 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     EXPECT_NE(html.find(s), std::string::npos) << s;
 
   EXPECT_EQ(j["temperature"].get<double>(), 1.0);  // the world model's config
+  EXPECT_TRUE(j["guide_actions_within_top_k"].get<bool>());
 
   // --set world.temperature reaches the sampler: the same long rollout, sharper distributions, other tokens.
   // With --world-eval the likelihood figures and both Fig. 5 plots join the report.
   r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
                      " --max-windows 2 --sweep-windows 1 --out " + q(p.dir / "world-eval"));
   ASSERT_EQ(r.status, 0) << r.output;
-  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --world-eval " +
+  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --set world.guide_actions_within_top_k=false"
+                     " --world-eval " +
                      q(p.dir / "world-eval") + " --out " + q(p.dir / "eval-cold"));
   ASSERT_EQ(r.status, 0) << r.output;
   for (const char* f : {"plots/perplexity_by_position.svg", "plots/perplexity_by_strategy.svg"})
@@ -312,6 +314,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   auto cold = nlohmann::json::parse(read_file(p.dir / "eval-cold" / "eval.json"));
   EXPECT_EQ(cold["world_model"]["last_frame"]["strategies"].size(), 3u);
   EXPECT_EQ(cold["temperature"].get<double>(), 0.3);
+  EXPECT_FALSE(cold["guide_actions_within_top_k"].get<bool>());
   EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
 
   // Bad inputs: one clear line, non-zero exit, nothing written.

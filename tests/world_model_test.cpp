@@ -202,6 +202,17 @@ TEST(WorldGuidance, FormulaAndSchedules) {
   EXPECT_NEAR(g.at(4, 0, 10), 4 * 0.5 * (1 + std::cos(M_PI * 2 / 5.0)), 1e-12);  // u = (4 - 2) / (8 - 2 - 1)
 }
 
+TEST(WorldGuidance, WithinTopKDropsWhatTheConditionalRanksLow) {
+  auto cond = torch::tensor({{0.0, 3.0, 1.0, 2.0}, {5.0, 4.0, -1.0, 0.0}});
+  auto guided = torch::tensor({{9.0, -1.0, 7.0, 0.5}, {1.0, 2.0, 30.0, 3.0}});
+  auto w = within_top_k(guided, cond, 2);
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_TRUE(torch::equal(w, torch::tensor({{-inf, -1.0f, -inf, 0.5f}, {1.0f, 2.0f, -inf, -inf}})));
+  EXPECT_TRUE(torch::equal(w.argmax(-1), torch::tensor({3, 1})));  // not the guided favourites 0 and 2
+  EXPECT_TRUE(torch::equal(within_top_k(guided, cond, 4), guided));
+  EXPECT_NE(test::error_of([&] { within_top_k(guided, cond, 0); }).find("k must be >= 1"), std::string::npos);
+}
+
 // Every generated frame must be the argmax of a full forward over the window the sampler saw: the last T steps
 // (or all steps before the window fills). This checks the KV cache and the sliding window's re-indexed positions.
 TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
@@ -293,6 +304,43 @@ TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
   auto l = m->forward(b).select(1, P);  // [2, n, K]: teacher-forced on the rollout's own tokens
   EXPECT_FALSE(torch::allclose(l[0], l[1]));  // the two branches differ: the check below is not vacuous
   EXPECT_TRUE(torch::equal(guide(l[0], l[1], s).argmax(-1), r.tokens[0][P]));
+}
+
+// Action guidance within the conditional top k (SamplingOptions::guide_actions_within_top_k): with k = 1 the only
+// candidate is the conditional argmax, whatever the guided logits say; unconstrained, or when the guidance contrasts
+// text too, top-1 of the guided logits is eq. 2's argmax.
+TEST(WorldRollout, ActionGuidanceStaysWithinTheConditionalTopK) {
+  Config c = tiny();
+  auto m = small_model(c, 6);
+  const int64_t P = 2, F = 1;
+  torch::manual_seed(5);
+  RolloutPrompt p;
+  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.actions = torch::randn({P + F, 2}) * 3;
+  const auto text = torch::randint(2, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.sampling.strategy = Strategy::TopK;
+  o.sampling.top_k = 1;
+  o.guidance.scale = 8;
+  for (int mode = 0; mode < 3; ++mode) {  // 0: actions, constrained; 1: actions, unconstrained; 2: text, "constrained"
+    o.sampling.guide_actions_within_top_k = mode != 1;
+    if (mode == 2) p.text_ids = text;
+    auto r = rollout(m, p, o);
+    torch::NoGradGuard ng;
+    WorldBatch b;
+    b.tokens = r.tokens.repeat({2, 1, 1});
+    b.actions = p.actions.unsqueeze(0).repeat({2, 1, 1});
+    b.use_action = torch::tensor({true, false});
+    if (mode == 2) {
+      b.text_ids = text.unsqueeze(0).repeat({2, 1, 1});
+      b.use_text = torch::tensor({true, false});
+    }
+    auto l = m->forward(b).select(1, P);  // [2, n, K] teacher-forced on the rollout's own tokens
+    auto cond_pick = l[0].argmax(-1), guided_pick = guide(l[0], l[1], o.guidance.scale).argmax(-1);
+    EXPECT_FALSE(torch::equal(cond_pick, guided_pick));  // guidance would change the frame: the test can fail
+    EXPECT_TRUE(torch::equal(mode == 0 ? cond_pick : guided_pick, r.tokens[0][P])) << "mode " << mode;
+  }
 }
 
 // One batched rollout with a prompt, actions and text per future gives what separate rollouts give (argmax), with

@@ -72,7 +72,7 @@ void register_eval(CLI::App& app) {
     }
     auto dev = parse_device(run.run.device);
     auto m = control::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
-    apply_sampling_sets(*flags, "world", {"world.top_k", "world.temperature"}, e->world, m.info.config);  // --top-k still wins
+    apply_sampling_sets(*flags, "world", {"world.top_k", "world.temperature", "world.guide_actions_within_top_k"}, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())
       fail("{}: {} tokens per frame, the world model takes {}", e->tokens, ds.tokens_per_step(), m.info.n());
@@ -86,9 +86,11 @@ void register_eval(CLI::App& app) {
     world::SamplingOptions sampling;
     sampling.top_k = e->top_k > 0 ? e->top_k : m.info.config.world.top_k;  // paper §5.1: top-k sampling
     sampling.temperature = m.info.config.world.temperature;
+    sampling.guide_actions_within_top_k = m.info.config.world.guide_actions_within_top_k;
     nlohmann::json j = {{"world", e->world},        {"tokenizer", e->tokenizer},
                         {"tokens", e->tokens},      {"top_k", sampling.top_k},
-                        {"temperature", sampling.temperature}};
+                        {"temperature", sampling.temperature},
+                        {"guide_actions_within_top_k", sampling.guide_actions_within_top_k}};
     ProgressBar bar(int64_t(parts.size()), "eval");
     int done = 0;
     if (parts.count("action")) {

@@ -63,7 +63,9 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)");
   cmd->add_option("--top-p", g->top_p, "p for top-p");
   cmd->add_option("--temperature", g->temperature, "softmax temperature");
-  cmd->add_option("--guidance", g->guidance, "classifier-free guidance scale s (0 = off)");
+  cmd->add_option("--guidance", g->guidance,
+                  "classifier-free guidance scale s (0 = off); guided on actions alone, top-k tokens stay within the "
+                  "unguided top k (--set world.guide_actions_within_top_k=false lifts that)");
   cmd->add_option("--guidance-tokens", g->token_schedule, "guidance over the tokens of a frame: constant or linear");
   cmd->add_option("--guidance-frames", g->frame_schedule, "guidance over frames: constant or cosine");
   cmd->add_option("--plateau", g->plateau, "frames at full guidance before the cosine decay");
@@ -75,7 +77,7 @@ void register_generate(CLI::App& app) {
     auto dev = parse_device(run.run.device);
     world::WorldInfo info;
     auto model = world::load_world(g->world, dev, &info);
-    apply_sampling_sets(*flags, "world", {"world.top_k"}, g->world, info.config);  // --top-k still wins
+    apply_sampling_sets(*flags, "world", {"world.top_k", "world.guide_actions_within_top_k"}, g->world, info.config);  // --top-k still wins
     const auto& L = model->layout;
     const int64_t F = g->frames;
     if (F < 1) fail("--frames must be >= 1");
@@ -159,6 +161,7 @@ void register_generate(CLI::App& app) {
     o.sampling.top_k = g->top_k > 0 ? g->top_k : info.config.world.top_k;
     o.sampling.top_p = g->top_p;
     o.sampling.temperature = g->temperature;
+    o.sampling.guide_actions_within_top_k = info.config.world.guide_actions_within_top_k;
     o.guidance.scale = g->guidance;
     o.guidance.tokens = world::parse_token_schedule(g->token_schedule);
     o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
@@ -174,6 +177,7 @@ void register_generate(CLI::App& app) {
     auto grid = r.tokens.view({g->futures, steps, info.grid_h, info.grid_w}).to(torch::kInt);
     nlohmann::json meta = {{"prompt_frames", P}, {"frames", F}, {"futures", g->futures}, {"window_stride", g->window_stride},
                            {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", g->guidance},
+                           {"guide_actions_within_top_k", o.sampling.guide_actions_within_top_k},
                            {"text", g->text}, {"negative", g->negative}, {"steer", g->steer},
                            {"seconds", r.seconds}, {"frames_per_second", double(F * g->futures) / r.seconds}};
     save_tensors({{"tokens", grid}, {"actions", acts}}, fs::path(flags->out) / "rollout.safetensors",

@@ -127,6 +127,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("world.activation_checkpointing", &w.activation_checkpointing));
   f.push_back(field("world.top_k", &w.top_k));
   f.push_back(field("world.temperature", &w.temperature));
+  f.push_back(field("world.guide_actions_within_top_k", &w.guide_actions_within_top_k));
   f.push_back(field("world.guidance_scale", &w.guidance_scale));
   auto& v = decoder;
   f.push_back(field("decoder.channels", &v.channels));
@@ -239,6 +240,7 @@ void Config::validate() const {
   need(world.context_steps >= 1 && world.text_tokens >= 1, "world.context_steps >= 1 and world.text_tokens >= 1");
   double p = world.p_uncond + world.p_action + world.p_text;
   need(p > 0.999 && p < 1.001, "world.p_uncond + p_action + p_text must be 1");
+  need(world.top_k >= 1, "world.top_k must be >= 1");
   need(data.balance_exponent >= 0 && data.balance_exponent <= 1, "data.balance_exponent must be in [0, 1]");
   need(data.native_fps > 0 && data.world_fps > 0 && data.world_fps <= data.native_fps,
        "data.world_fps must be in (0, data.native_fps]");

@@ -79,6 +79,7 @@ struct WorldConfig {
   bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
   int top_k = 50;                // paper §5.1 Fig. 5: top-k = 50
   double temperature = 1.0;
+  bool guide_actions_within_top_k = true;  // action-guided tokens come from the conditional top k (world/sampling.h)
   double guidance_scale = 0.0;   // s in l = (1 + s) l_cond - s l_uncond (paper eq. 2)
 };
 

@@ -107,6 +107,10 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
   const bool guided = o.guidance.active();
   const int64_t B = guided ? 2 * N : N, n = L.n, d = model->d;
   Conditioner cond{prompt, N, guided, dev};
+  const bool text_guided = prompt.text_ids.defined() || prompt.text_emb.defined() ||
+                           prompt.negative_text_ids.defined() || prompt.negative_text_emb.defined();
+  const bool within = guided && !text_guided && o.sampling.guide_actions_within_top_k &&
+                      o.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
   auto gen = at::detail::createCPUGenerator(o.seed);
 
   auto all = torch::zeros({B, steps, n}, torch::TensorOptions().dtype(torch::kLong).device(dev));
@@ -139,7 +143,9 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
       auto lg = model->logits(last);  // [B, K]
       torch::Tensor tok;
       if (guided) {
-        auto l = guide(lg.narrow(0, 0, N), lg.narrow(0, N, N), o.guidance.at(int(k - P), int(i), int(n)));
+        auto c = lg.narrow(0, 0, N);
+        auto l = guide(c, lg.narrow(0, N, N), o.guidance.at(int(k - P), int(i), int(n)));
+        if (within) l = within_top_k(l, c, o.sampling.top_k);
         tok = sample_tokens(l, o.sampling, gen);
         tok = torch::cat({tok, tok});  // both halves continue from the same chosen token
       } else {

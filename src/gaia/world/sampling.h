@@ -16,6 +16,11 @@ struct SamplingOptions {
   int top_k = 50;            // paper §5.1
   double top_p = 0.9;
   double temperature = 1.0;
+  // Guidance on the actions alone, with top-k: draw only from the conditional logits' top k, re-weighted by the
+  // guided ones (guidance.h within_top_k). Unconstrained, the scale steering needs (s = 16) turns rollouts to noise
+  // within a few frames. Text guidance is left free: at s = 4 the constraint cost weather prompts ~10 points (fog
+  // needs codes the conditional ranks low; docs/evaluation.md).
+  bool guide_actions_within_top_k = true;
 };
 
 // logits [B, K] -> token ids [B] (int64). Random draws come from `gen` only, so rollouts are reproducible.
