@@ -52,6 +52,12 @@ TEST(Config, UnknownKeysAndBadValuesNameTheKey) {
   EXPECT_EQ(c.tokenizer.channel_mult, (std::vector<int>{1, 2, 4, 4}));
   c.set("tokenizer.downsample=3");
   EXPECT_THROW(c.validate(), Error);
+  Config k;
+  k.set("world.guide_actions_within_top_k=false");
+  EXPECT_FALSE(k.world.guide_actions_within_top_k);
+  EXPECT_THROW(k.set("world.guide_actions_within_top_k=maybe"), Error);
+  k.set("world.top_k=0");
+  EXPECT_NE(test::error_of([&] { k.validate(); }).find("world.top_k"), std::string::npos);
 }
 
 TEST(Plan, PaperConfigMatchesThePaper) {

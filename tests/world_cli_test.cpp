@@ -168,6 +168,21 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   SafetensorsFile f(p.dir / "k1" / "rollout.safetensors");
   auto t = tensor_from_view(f.get("tokens"));
   EXPECT_TRUE(torch::equal(t[0], t[1]));
+  // Steering guidance contrasts the command with its mirror image by default, with null actions on request (which
+  // frames that gives is WorldRollout.NegativeActionsReplaceTheNullOnes; this barely trained model may not show it).
+  const std::string steer = "generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2" +
+                            " --steer strong-left --guidance 30 --sampling argmax --out ";
+  r = test::run_gaia(steer + q(p.dir / "mirror"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(steer + q(p.dir / "null") + " --action-negative null");
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile fm(p.dir / "mirror" / "rollout.safetensors"), fn(p.dir / "null" / "rollout.safetensors");
+  EXPECT_EQ(nlohmann::json::parse(fm.metadata().at("gaia.rollout"))["action_negative"], "mirror");
+  EXPECT_EQ(nlohmann::json::parse(fn.metadata().at("gaia.rollout"))["action_negative"], "null");
+  r = test::run_gaia(steer + q(p.dir / "bad-negative") + " --action-negative sideways");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--action-negative"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad-negative" / "rollout.safetensors"));
 }
 
 // Fine-tuning (--init): the run starts from the given weights and keeps their text vocabulary, even on data whose
@@ -242,6 +257,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   const auto& a = j["action_control"];
   EXPECT_EQ(a["rollouts"].get<int>(), 2 * 8);  // prompts x commands
   EXPECT_EQ(a["guidance_scale"].get<double>(), 1.5);
+  EXPECT_EQ(a["negative_actions"], "mirror");  // the default: the command turning the other way
   EXPECT_EQ(a["probe_frames"].get<int64_t>(), K);  // the read-back windows span the last prompt frame and all generated
   for (auto it = a["per_command"].begin(); it != a["per_command"].end(); ++it) {  // one window here, its mean = the whole
     const auto& w = it.value()["read_curvature_by_window"];

@@ -202,15 +202,16 @@ TEST(WorldGuidance, FormulaAndSchedules) {
   EXPECT_NEAR(g.at(4, 0, 10), 4 * 0.5 * (1 + std::cos(M_PI * 2 / 5.0)), 1e-12);  // u = (4 - 2) / (8 - 2 - 1)
 }
 
-TEST(WorldGuidance, WithinTopKDropsWhatTheConditionalRanksLow) {
+TEST(WorldSampling, KeepTopKRanksByAnotherTensor) {
   auto cond = torch::tensor({{0.0, 3.0, 1.0, 2.0}, {5.0, 4.0, -1.0, 0.0}});
   auto guided = torch::tensor({{9.0, -1.0, 7.0, 0.5}, {1.0, 2.0, 30.0, 3.0}});
-  auto w = within_top_k(guided, cond, 2);
+  auto w = keep_top_k(guided, cond, 2);
   const float inf = std::numeric_limits<float>::infinity();
   EXPECT_TRUE(torch::equal(w, torch::tensor({{-inf, -1.0f, -inf, 0.5f}, {1.0f, 2.0f, -inf, -inf}})));
   EXPECT_TRUE(torch::equal(w.argmax(-1), torch::tensor({3, 1})));  // not the guided favourites 0 and 2
-  EXPECT_TRUE(torch::equal(within_top_k(guided, cond, 4), guided));
-  EXPECT_NE(test::error_of([&] { within_top_k(guided, cond, 0); }).find("k must be >= 1"), std::string::npos);
+  EXPECT_TRUE(torch::equal(keep_top_k(guided, cond, 4), guided));
+  EXPECT_TRUE(torch::equal(keep_top_k(cond, cond, 1).argmax(-1), cond.argmax(-1)));
+  EXPECT_NE(test::error_of([&] { keep_top_k(guided, cond, 0); }).find("top_k must be >= 1"), std::string::npos);
 }
 
 // Every generated frame must be the argmax of a full forward over the window the sampler saw: the last T steps
@@ -280,6 +281,19 @@ TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {
   EXPECT_FALSE(torch::equal(s1.tokens[0], s1.tokens[1]));
 }
 
+namespace {
+
+// A random prompt of P frames with random actions (x `scale`) for all P + F steps, drawn from `seed`.
+RolloutPrompt action_prompt(int64_t P, int64_t F, uint64_t seed, double scale) {
+  torch::manual_seed(seed);
+  RolloutPrompt p;
+  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.actions = torch::randn({P + F, 2}) * scale;
+  return p;
+}
+
+}  // namespace
+
 // Guidance on the actions alone (no text; `gaia eval --action-guidance`): the unconditional rows see null action
 // tokens, so the guided frame is the argmax of eq. 2 over two plain forward passes, with and without the actions.
 TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
@@ -287,10 +301,7 @@ TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
   const double s = 2;
-  torch::manual_seed(5);
-  RolloutPrompt p;
-  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
-  p.actions = torch::randn({P + F, 2}) * 3;
+  RolloutPrompt p = action_prompt(P, F, 5, 3);
   RolloutOptions o;
   o.frames = int(F);
   o.sampling.strategy = Strategy::Argmax;
@@ -306,6 +317,37 @@ TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
   EXPECT_TRUE(torch::equal(guide(l[0], l[1], s).argmax(-1), r.tokens[0][P]));
 }
 
+// Negative actions (`gaia eval --action-negative mirror`): the unconditional rows see them instead of null actions,
+// so the guided frame is eq. 2's argmax between the command and its mirror image.
+TEST(WorldRollout, NegativeActionsReplaceTheNullOnes) {
+  Config c = tiny();
+  auto m = small_model(c, 6);
+  const int64_t P = 2, F = 1;
+  RolloutPrompt p = action_prompt(P, F, 7, 10);
+  p.negative_actions = mirrored_actions(p.actions, 0);
+  EXPECT_TRUE(torch::equal(p.negative_actions.select(1, 0), p.actions.select(1, 0)));  // speed kept
+  EXPECT_TRUE(torch::equal(p.negative_actions.select(1, 1), -p.actions.select(1, 1)));
+  auto later = mirrored_actions(p.actions.unsqueeze(0).repeat({2, 1, 1}), P);  // per future, from the first generated step
+  EXPECT_TRUE(torch::equal(later.narrow(1, 0, P), p.actions.narrow(0, 0, P).unsqueeze(0).repeat({2, 1, 1})));
+  EXPECT_TRUE(torch::equal(later.select(1, P).select(1, 1), -p.actions[P][1].repeat({2})));
+  EXPECT_NE(test::error_of([&] { mirrored_actions(torch::zeros({3, 3}), 0); }).find("mirrored_actions"), std::string::npos);
+  RolloutOptions o;
+  o.frames = int(F);
+  o.sampling.strategy = Strategy::Argmax;
+  o.guidance.scale = 40;
+  auto r = rollout(m, p, o);
+  torch::NoGradGuard ng;
+  WorldBatch b;
+  b.tokens = r.tokens.repeat({3, 1, 1});
+  b.actions = torch::stack({p.actions, p.negative_actions, p.actions});
+  b.use_action = torch::tensor({true, true, false});
+  auto l = m->forward(b).select(1, P);  // [3, n, K]: command, mirrored command, no actions
+  EXPECT_FALSE(torch::equal(guide(l[0], l[1], 40).argmax(-1), guide(l[0], l[2], 40).argmax(-1)));  // not vacuous
+  EXPECT_TRUE(torch::equal(guide(l[0], l[1], 40).argmax(-1), r.tokens[0][P]));
+  p.actions = torch::Tensor();
+  EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("negative actions need actions"), std::string::npos);
+}
+
 // Action guidance within the conditional top k (SamplingOptions::guide_actions_within_top_k): with k = 1 the only
 // candidate is the conditional argmax, whatever the guided logits say; unconstrained, or when the guidance contrasts
 // text too, top-1 of the guided logits is eq. 2's argmax.
@@ -313,10 +355,7 @@ TEST(WorldRollout, ActionGuidanceStaysWithinTheConditionalTopK) {
   Config c = tiny();
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
-  torch::manual_seed(5);
-  RolloutPrompt p;
-  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
-  p.actions = torch::randn({P + F, 2}) * 3;
+  RolloutPrompt p = action_prompt(P, F, 5, 3);
   const auto text = torch::randint(2, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
   RolloutOptions o;
   o.frames = int(F);

@@ -37,9 +37,8 @@ struct DemoFlags {
   // and weather swings by 20 points between seeds at s = 6 (82% and 61.5%), so the demo takes the middle
   // (docs/evaluation.md).
   double fps = 12.5, guidance = 4.0;
-  // Guidance on the actions (eq. 2, null actions as unconditional): with the shipped world model s = 16 read back
-  // curvature at Spearman 0.67 / 86% of the signs (s = 10: 0.60 / 80%; unguided 0.09 / 56%), with frames ~2.8 dB
-  // further from the replay (docs/evaluation.md).
+  // Guidance on the actions (eq. 2 with the mirrored command as the unconditional branch, within the conditional
+  // top k): the shipped world model steers best at s = 16 (docs/evaluation.md, "Action control").
   double steer_guidance = 16.0;
   bool from_scratch = false;
 };
@@ -74,7 +73,8 @@ void register_demo(CLI::App& app) {
   cmd->add_option("--fps", d->fps, "output rate of the video decoder: 6.25, 12.5 or 25 Hz");
   cmd->add_option("--guidance", d->guidance, "classifier-free guidance scale of the text-prompted rollouts");
   cmd->add_option("--steer-guidance", d->steer_guidance,
-                  "classifier-free guidance scale on the steering commands (null actions as unconditional; 0 = off)");
+                  "classifier-free guidance scale on the steering commands (the mirrored command as unconditional; "
+                  "0 = off)");
   cmd->add_flag("--from-scratch", d->from_scratch, "first train every model with `gaia train-all` (hours on a CPU)");
   add_shared_flags(cmd, flags.get(), "output directory (default: demo-out)");
   cmd->callback([=] {
@@ -167,6 +167,7 @@ void register_demo(CLI::App& app) {
       a.select(1, 0).fill_(v0 / world::kSpeedScale);
       a.select(1, 1).fill_(steer[s].second / world::kCurvatureScale);
     }
+    sp.negative_actions = world::mirrored_actions(sp.actions, P - 1);  // left contrasted with right (rollout.h)
     world::RolloutOptions ro;
     ro.frames = int(F);
     ro.futures = futures;
@@ -298,7 +299,7 @@ void register_demo(CLI::App& app) {
     sections.push_back({{"title", "Steering"},
                         {"text", fmt::format("The same prompt with the actions commanded: curvature +0.01 (left) and "
                                              "-0.01 1/m (right), the speed held, with classifier-free guidance s = {} "
-                                             "on the actions. Beside it the procedural world replayed under the same "
+                                             "on the actions against the mirrored command. Beside it the procedural world replayed under the same "
                                              "commands: the counterfactual ground truth.",
                                              d->steer_guidance)},
                         {"videos", {{{"caption", truth.empty() ? "world model" : "world model | counterfactual replay"},

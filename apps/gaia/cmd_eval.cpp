@@ -19,7 +19,8 @@ namespace {
 
 struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
-      scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval;
+      scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
+      action_negative = "mirror";
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0};
@@ -47,6 +48,10 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)");
   cmd->add_option("--action-guidance", e->action_guidance,
                   "classifier-free guidance scale on the commanded actions (action control; 0 = off)");
+  cmd->add_option("--action-negative", e->action_negative,
+                  "the unconditional branch of action guidance: mirror (the counter-command: turning the other way, "
+                  "at the kept speed; default) or null (no actions, eq. 2 as in the paper)")
+      ->check(CLI::IsMember({"null", "mirror"}));
   cmd->add_option("--scales", e->scales, "guidance scales for text control, e.g. 0,1,2,4")->delimiter(',');
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
@@ -100,6 +105,7 @@ void register_eval(CLI::App& app) {
       o.frames = e->frames;
       o.sampling = sampling;
       o.guidance_scale = e->action_guidance;
+      o.mirror_negative = e->action_negative == "mirror";
       o.seed = uint64_t(run.run.seed);
       j["action_control"] = control::action_control(m, ds, raw.get(), o, out);
       bar.update(++done, "action control");

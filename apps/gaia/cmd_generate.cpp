@@ -21,7 +21,8 @@ namespace gaia::app {
 namespace {
 
 struct GenerateFlags {
-  std::string world, tokenizer, tokens, episode, video, actions_csv, steer = "none", text, negative;
+  std::string world, tokenizer, tokens, episode, video, actions_csv, steer = "none", text, negative,
+      action_negative = "mirror";
   std::string sampling, token_schedule = "constant", frame_schedule = "constant";
   int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0, window_stride = 1;
   double speed = -1, top_p = 0.9, temperature = 1.0, guidance = 0;
@@ -66,6 +67,10 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--guidance", g->guidance,
                   "classifier-free guidance scale s (0 = off); guided on actions alone, top-k tokens stay within the "
                   "unguided top k (--set world.guide_actions_within_top_k=false lifts that)");
+  cmd->add_option("--action-negative", g->action_negative,
+                  "what guidance contrasts the actions with: mirror (the counter-command: turning the other way at "
+                  "the prompt's speed; default) or null (no actions, eq. 2 as in the paper)")
+      ->check(CLI::IsMember({"null", "mirror"}));
   cmd->add_option("--guidance-tokens", g->token_schedule, "guidance over the tokens of a frame: constant or linear");
   cmd->add_option("--guidance-frames", g->frame_schedule, "guidance over frames: constant or cosine");
   cmd->add_option("--plateau", g->plateau, "frames at full guidance before the cosine decay");
@@ -125,6 +130,9 @@ void register_generate(CLI::App& app) {
     torch::Tensor acts = torch::full({steps, 2}, std::numeric_limits<float>::quiet_NaN());
     if (prompt_actions.defined()) acts.narrow(0, 0, P).copy_(prompt_actions);
     bool any_action = prompt_actions.defined();
+    double last_speed = 8.0;  // m/s when neither --speed nor a prompt says
+    if (P > 0 && prompt_actions.defined() && !std::isnan(prompt_actions[P - 1][0].item<float>()))
+      last_speed = prompt_actions[P - 1][0].item<float>() * world::kSpeedScale;
     if (!g->actions_csv.empty()) {
       auto rows = synth::read_actions_csv(g->actions_csv);
       if (int64_t(rows.size()) != F)
@@ -135,9 +143,6 @@ void register_generate(CLI::App& app) {
       }
       any_action = true;
     } else if (g->steer != "none" || g->speed >= 0) {
-      double last_speed = 8.0;  // m/s when neither --speed nor a prompt says
-      if (P > 0 && prompt_actions.defined() && !std::isnan(prompt_actions[P - 1][0].item<float>()))
-        last_speed = prompt_actions[P - 1][0].item<float>() * world::kSpeedScale;
       const double v = g->speed >= 0 ? g->speed : last_speed;
       const double c = g->steer != "none" ? steer_curvature(g->steer) : 0.0;
       acts.narrow(0, P, F).select(1, 0).fill_(v / world::kSpeedScale);
@@ -145,6 +150,11 @@ void register_generate(CLI::App& app) {
       any_action = true;
     }
     if (any_action) p.actions = acts;
+    const bool commanded = F > 0 && !std::isnan(acts[P][0].item<float>());  // generated steps have actions
+    if (commanded && g->action_negative == "mirror") {  // the counter-command: the other way, the prompt's speed
+      p.negative_actions = world::mirrored_actions(acts, P);
+      p.negative_actions.narrow(0, P, F).select(1, 0).fill_(last_speed / world::kSpeedScale);
+    }
     auto text_rows = [&](const std::string& t) {
       auto ids = info.vocab.encode(t, L.m);
       return torch::tensor(ids, torch::kLong).view({1, L.m}).repeat({steps, 1});
@@ -179,6 +189,7 @@ void register_generate(CLI::App& app) {
                            {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", g->guidance},
                            {"guide_actions_within_top_k", o.sampling.guide_actions_within_top_k},
                            {"text", g->text}, {"negative", g->negative}, {"steer", g->steer},
+                           {"action_negative", g->action_negative},
                            {"seconds", r.seconds}, {"frames_per_second", double(F * g->futures) / r.seconds}};
     save_tensors({{"tokens", grid}, {"actions", acts}}, fs::path(flags->out) / "rollout.safetensors",
                  {{"gaia.rollout", meta.dump()}});

@@ -89,14 +89,16 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   cond.actions = torch::full({R, P + F, 2}, std::nan(""));
   cond.actions.narrow(1, 0, P).copy_(pr.actions.repeat_interleave(C, 0));
   std::vector<double> cmd_speed(static_cast<size_t>(R)), cmd_curv(static_cast<size_t>(R));
+  std::vector<double> kept_speed(static_cast<size_t>(R));  // m/s the steering commands hold: the prompt's, >= 3
   std::vector<std::vector<synth::ActionStep>> per_frame(static_cast<size_t>(R));  // commanded (m/s, 1/m) per generated frame
   for (int64_t r = 0; r < R; ++r) {
     const auto& c = cmds[size_t(r % C)];
     double v0 = pr.actions[r / C][P - 1][0].item<double>() * world::kSpeedScale;
     if (!std::isfinite(v0)) v0 = 8.0;
+    kept_speed[size_t(r)] = std::max(v0, 3.0);
     double ss = 0, sc = 0;
     for (int64_t j = 0; j < F; ++j) {
-      synth::ActionStep a{c.speed >= 0 ? c.speed : std::max(v0, 3.0), c.curvature + c.drift * double(j + 1)};
+      synth::ActionStep a{c.speed >= 0 ? c.speed : kept_speed[size_t(r)], c.curvature + c.drift * double(j + 1)};
       per_frame[size_t(r)].push_back(a);
       for (int64_t k : {P - 1 + j, j == F - 1 ? P + j : P - 1 + j}) {
         cond.actions[r][k][0] = a.speed / world::kSpeedScale;
@@ -108,8 +110,14 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     cmd_speed[size_t(r)] = ss / double(F);
     cmd_curv[size_t(r)] = sc / double(F);
   }
+  if (o.mirror_negative) {  // the counter-command: turn the other way at the speed the steering commands keep
+    cond.negative_actions = world::mirrored_actions(cond.actions, P - 1);
+    for (int64_t r = 0; r < R; ++r)
+      cond.negative_actions[r].narrow(0, P - 1, F + 1).select(1, 0).fill_(kept_speed[size_t(r)] / world::kSpeedScale);
+  }
   world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on
   null_actions.actions = cond.actions.clone();  // (a struct copy shares the tensors' storage)
+  null_actions.negative_actions = torch::Tensor();  // guided towards the prompt's own actions against null ones
   null_actions.actions.narrow(1, P - 1, F + 1).fill_(std::nan(""));
 
   world::RolloutOptions ro;
@@ -133,6 +141,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   j["prompt_frames"] = P;
   j["generated_frames"] = F;
   j["guidance_scale"] = o.guidance_scale;
+  j["negative_actions"] = o.mirror_negative ? "mirror" : "null";
   j["generated_frames_per_second"] = double(R * F) / with.seconds;
   j["conditioned"] = agreement(cmd_speed, cmd_curv, rw, all);
   j["conditioned_in_distribution"] = agreement(cmd_speed, cmd_curv, rw, in_dist);

@@ -32,6 +32,11 @@ struct ActionEvalOptions {
   // Classifier-free guidance on the actions (eq. 2 with null action tokens as the unconditional branch): the
   // paper guides text; the same mechanism amplifies whatever the model has learned about the commands.
   double guidance_scale = 0;
+  // The unconditional branch's actions: null (eq. 2 as in the paper) or, with `mirror_negative`, the
+  // counter-command: the curvature mirrored, the speed the steering commands keep (the prompt's, at least 3 m/s).
+  // Guidance then contrasts turning right with turning left, and slow or fast with keeping the speed, instead of
+  // either with no command; a straight command at the kept speed is not guided at all.
+  bool mirror_negative = true;
   uint64_t seed = 0;
 };
 

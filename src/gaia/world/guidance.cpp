@@ -1,7 +1,6 @@
 #include "gaia/world/guidance.h"
 
 #include <cmath>
-#include <limits>
 
 #include "gaia/core/error.h"
 
@@ -16,13 +15,6 @@ double GuidanceSchedule::at(int frame, int token, int n) const {
     s *= 0.5 * (1.0 + std::cos(M_PI * u));
   }
   return s;
-}
-
-torch::Tensor within_top_k(const torch::Tensor& guided, const torch::Tensor& cond, int k) {
-  if (k < 1) fail("within_top_k: k must be >= 1 (got {})", k);
-  if (k >= cond.size(-1)) return guided;
-  auto keep = torch::zeros_like(guided, torch::kBool).scatter_(-1, std::get<1>(cond.topk(k, -1)), true);
-  return guided.masked_fill(~keep, -std::numeric_limits<float>::infinity());
 }
 
 GuidanceSchedule::Tokens parse_token_schedule(const std::string& s) {

@@ -30,10 +30,4 @@ inline torch::Tensor guide(const torch::Tensor& cond, const torch::Tensor& uncon
   return (1.0 + s) * cond - s * uncond;
 }
 
-// Guided logits [B, K] with every token outside the top k of the conditional logits [B, K] set to -inf: the
-// plausibility constraint of contrastive decoding (Li et al. 2023) for top-k sampling. Guidance then re-weights the
-// tokens the unguided sampler could have drawn instead of extrapolating into codes the model finds implausible
-// (SamplingOptions::guide_actions_within_top_k).
-torch::Tensor within_top_k(const torch::Tensor& guided, const torch::Tensor& cond, int k);
-
 }  // namespace gaia::world

@@ -38,8 +38,8 @@ struct Conditioner {
     const int64_t B = guided ? 2 * N : N;
     auto cond_rows = torch::arange(B) < N;  // [B] true for the conditional half
     if (p.actions.defined()) {
-      b.actions = rows(p.actions, 2, k0, k1, {});
-      b.use_action = cond_rows.to(dev);
+      b.actions = rows(p.actions, 2, k0, k1, p.negative_actions);
+      b.use_action = (p.negative_actions.defined() ? torch::ones({B}, torch::kBool) : cond_rows).to(dev);
     }
     const bool neg = p.negative_text_ids.defined() || p.negative_text_emb.defined();
     if (p.text_emb.defined() || p.negative_text_emb.defined()) {
@@ -82,6 +82,8 @@ void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t N, in
            t.size(o + 1), steps, width);
   };
   rows_ok(p.actions, "actions", 2, 2);
+  rows_ok(p.negative_actions, "negative actions", 2, 2);
+  if (p.negative_actions.defined() && !p.actions.defined()) fail("rollout: negative actions need actions");
   rows_ok(p.text_ids, "text ids", 2, L.m);
   rows_ok(p.text_emb, "text embeddings", 3, L.m);
   rows_ok(p.negative_text_ids, "negative text ids", 2, L.m);
@@ -89,6 +91,15 @@ void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t N, in
 }
 
 }  // namespace
+
+torch::Tensor mirrored_actions(const torch::Tensor& actions, int64_t from) {
+  auto m = actions.clone();
+  const int64_t d = m.dim() - 2;  // the steps dimension
+  if (d < 0 || m.size(-1) != 2 || from < 0 || from > m.size(d))
+    fail("mirrored_actions: need [steps, 2] or [futures, steps, 2] actions and a step within them");
+  m.narrow(d, from, m.size(d) - from).select(-1, 1).mul_(-1);
+  return m;
+}
 
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int, int)>& on_frame) {
@@ -145,7 +156,7 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
       if (guided) {
         auto c = lg.narrow(0, 0, N);
         auto l = guide(c, lg.narrow(0, N, N), o.guidance.at(int(k - P), int(i), int(n)));
-        if (within) l = within_top_k(l, c, o.sampling.top_k);
+        if (within) l = keep_top_k(l, c, o.sampling.top_k);
         tok = sample_tokens(l, o.sampling, gen);
         tok = torch::cat({tok, tok});  // both halves continue from the same chosen token
       } else {

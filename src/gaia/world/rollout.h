@@ -20,6 +20,9 @@ struct RolloutPrompt {
   torch::Tensor actions;            // [P + F, 2] normalised (batch.h), NaN = no action at that step
   torch::Tensor text_ids;           // [P + F, m] built-in text encoder ids
   torch::Tensor text_emb;           // [P + F, m, text_dim] precomputed text embeddings
+  // Negative actions: the unconditional branch sees these actions instead of null ones (e.g. the mirrored command,
+  // so that guidance contrasts a right turn with a left one rather than with no command).
+  torch::Tensor negative_actions;   // [P + F, 2]
   // Negative prompt (§5.1): the unconditional branch sees this text instead of the null text.
   torch::Tensor negative_text_ids;  // [P + F, m]
   torch::Tensor negative_text_emb;  // [P + F, m, text_dim]
@@ -41,6 +44,11 @@ struct RolloutResult {
   torch::Tensor tokens;             // [N, P + F, n] prompt followed by the generated frames
   double seconds = 0;               // wall time of the rollout
 };
+
+// Negative actions that turn the other way: `actions` ([S, 2] or [N, S, 2]) with the curvature mirrored from step
+// `from` on. As RolloutPrompt::negative_actions, guidance contrasts a turn with its mirror image instead of with
+// no command, which doubles the contrast and cancels a bias both share; a straight command is then not guided.
+torch::Tensor mirrored_actions(const torch::Tensor& actions, int64_t from);
 
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int generated, int total)>& on_frame = {});

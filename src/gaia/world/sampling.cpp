@@ -1,5 +1,7 @@
 #include "gaia/world/sampling.h"
 
+#include <limits>
+
 #include "gaia/core/error.h"
 
 namespace gaia::world {
@@ -22,21 +24,22 @@ std::string to_string(Strategy s) {
   return "?";
 }
 
+torch::Tensor keep_top_k(const torch::Tensor& logits, const torch::Tensor& ranking, int64_t k) {
+  if (k < 1) fail("top_k must be >= 1 (got {})", k);
+  if (k >= ranking.size(-1)) return logits;
+  auto keep = torch::zeros_like(logits, torch::kBool).scatter_(-1, std::get<1>(ranking.topk(k, -1)), true);
+  return logits.masked_fill(~keep, -std::numeric_limits<float>::infinity());
+}
+
 torch::Tensor sampling_distribution(const torch::Tensor& logits_in, const SamplingOptions& o) {
   auto logits = logits_in.to(torch::kFloat);
-  const int64_t K = logits.size(-1);
   if (o.strategy == Strategy::Argmax)
     return torch::zeros_like(logits).scatter_(-1, logits.argmax(-1, true), 1.0);
   if (!(o.temperature > 0)) fail("temperature must be > 0 (got {})", o.temperature);
   logits = logits / o.temperature;
   const float neg_inf = -std::numeric_limits<float>::infinity();
   if (o.strategy == Strategy::TopK) {
-    if (o.top_k < 1) fail("top_k must be >= 1 (got {})", o.top_k);
-    const int64_t k = std::min<int64_t>(o.top_k, K);
-    // Keep exactly the k highest by rank (a threshold on the k-th value would let ties through).
-    auto top = std::get<1>(logits.topk(k, -1));
-    auto keep = torch::zeros_like(logits, torch::kBool).scatter_(-1, top, true);
-    logits = logits.masked_fill(~keep, neg_inf);
+    logits = keep_top_k(logits, logits, o.top_k);
   } else if (o.strategy == Strategy::TopP) {
     if (!(o.top_p > 0 && o.top_p <= 1)) fail("top_p must be in (0, 1] (got {})", o.top_p);
     auto sorted = logits.sort(-1, /*descending=*/true);

@@ -17,7 +17,7 @@ struct SamplingOptions {
   double top_p = 0.9;
   double temperature = 1.0;
   // Guidance on the actions alone, with top-k: draw only from the conditional logits' top k, re-weighted by the
-  // guided ones (guidance.h within_top_k). Unconstrained, the scale steering needs (s = 16) turns rollouts to noise
+  // guided ones (keep_top_k below; the plausibility constraint of contrastive decoding, Li et al. 2023). Unconstrained, the scale steering needs (s = 16) turns rollouts to noise
   // within a few frames. Text guidance is left free: at s = 4 the constraint cost weather prompts ~10 points (fog
   // needs codes the conditional ranks low; docs/evaluation.md).
   bool guide_actions_within_top_k = true;
@@ -25,6 +25,11 @@ struct SamplingOptions {
 
 // logits [B, K] -> token ids [B] (int64). Random draws come from `gen` only, so rollouts are reproducible.
 torch::Tensor sample_tokens(const torch::Tensor& logits, const SamplingOptions& o, torch::Generator& gen);
+
+// logits [B, K] with every entry outside the k highest of `ranking` [B, K] set to -inf (exactly k by rank: a
+// threshold on the k-th value would let ties through). Top-k filtering is keep_top_k(l, l, k); guided logits kept
+// to the conditional model's candidates are keep_top_k(guided, cond, k).
+torch::Tensor keep_top_k(const torch::Tensor& logits, const torch::Tensor& ranking, int64_t k);
 
 // The filtered, renormalised distribution sample_tokens draws from: [B, K] probabilities (argmax: one-hot).
 torch::Tensor sampling_distribution(const torch::Tensor& logits, const SamplingOptions& o);
