@@ -273,7 +273,9 @@ TEST(Synth, SwervesSteerStronglyBothWaysAndReturnToTheLane) {
       const gs::ActionStep a = sim.policy();
       const gs::Ego& e = sim.world().ego();
       const bool swerving = sim.world().time() >= e.swerve_start && sim.world().time() < e.swerve_end;
-      if (swerving) EXPECT_LE(std::abs(a.curvature), limit + 1e-6) << "frame " << i;
+      if (swerving) {
+        EXPECT_LE(std::abs(a.curvature), limit + 1e-6) << "frame " << i;
+      }
       strong_left += a.curvature > 0.02;
       strong_right += a.curvature < -0.02;
       const double off = std::abs(e.d - e.d_ref);
