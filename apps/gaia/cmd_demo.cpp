@@ -151,7 +151,7 @@ void register_demo(CLI::App& app) {
     std::printf("prompt: %s, %lld frames at %g Hz\n", prompt_name.c_str(), (long long)P, rate);
 
     // 2. Three futures (no actions after the prompt), then steer left / right in a second batch: only the
-    // steering is guided (towards the commands, away from null actions).
+    // steering is guided (towards the commands, away from the mirrored commands).
     const std::vector<std::pair<std::string, double>> steer = {{"steer left", 0.01}, {"steer right", -0.01}};
     const int futures = 3;
     auto with_prompt = [&](int64_t rows) {
@@ -299,8 +299,8 @@ void register_demo(CLI::App& app) {
     sections.push_back({{"title", "Steering"},
                         {"text", fmt::format("The same prompt with the actions commanded: curvature +0.01 (left) and "
                                              "-0.01 1/m (right), the speed held, with classifier-free guidance s = {} "
-                                             "on the actions against the mirrored command. Beside it the procedural world replayed under the same "
-                                             "commands: the counterfactual ground truth.",
+                                             "on the actions against the mirrored command. Beside it the procedural "
+                                             "world replayed under the same commands: the counterfactual ground truth.",
                                              d->steer_guidance)},
                         {"videos", {{{"caption", truth.empty() ? "world model" : "world model | counterfactual replay"},
                                      {"items", steer_items}}}},
