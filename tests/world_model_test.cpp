@@ -324,13 +324,13 @@ TEST(WorldRollout, NegativeActionsReplaceTheNullOnes) {
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
   RolloutPrompt p = action_prompt(P, F, 7, 10);
-  p.negative_actions = mirrored_actions(p.actions, 0);
+  p.negative_actions = counter_actions(p.actions, 0);
   EXPECT_TRUE(torch::equal(p.negative_actions.select(1, 0), p.actions.select(1, 0)));  // speed kept
   EXPECT_TRUE(torch::equal(p.negative_actions.select(1, 1), -p.actions.select(1, 1)));
-  auto later = mirrored_actions(p.actions.unsqueeze(0).repeat({2, 1, 1}), P);  // per future, from the first generated step
+  auto later = counter_actions(p.actions.unsqueeze(0).repeat({2, 1, 1}), P);  // per future, from the first generated step
   EXPECT_TRUE(torch::equal(later.narrow(1, 0, P), p.actions.narrow(0, 0, P).unsqueeze(0).repeat({2, 1, 1})));
   EXPECT_TRUE(torch::equal(later.select(1, P).select(1, 1), -p.actions[P][1].repeat({2})));
-  EXPECT_NE(test::error_of([&] { mirrored_actions(torch::zeros({3, 3}), 0); }).find("mirrored_actions"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { counter_actions(torch::zeros({3, 3}), 0); }).find("counter_actions"), std::string::npos);
   RolloutOptions o;
   o.frames = int(F);
   o.sampling.strategy = Strategy::Argmax;

@@ -167,7 +167,7 @@ void register_demo(CLI::App& app) {
       a.select(1, 0).fill_(v0 / world::kSpeedScale);
       a.select(1, 1).fill_(steer[s].second / world::kCurvatureScale);
     }
-    sp.negative_actions = world::mirrored_actions(sp.actions, P - 1);  // left contrasted with right (rollout.h)
+    sp.negative_actions = world::counter_actions(sp.actions, P - 1);  // left contrasted with right (rollout.h)
     world::RolloutOptions ro;
     ro.frames = int(F);
     ro.futures = futures;

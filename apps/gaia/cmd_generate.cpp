@@ -150,11 +150,9 @@ void register_generate(CLI::App& app) {
       any_action = true;
     }
     if (any_action) p.actions = acts;
-    const bool commanded = F > 0 && !std::isnan(acts[P][0].item<float>());  // generated steps have actions
-    if (commanded && g->action_negative == "mirror") {  // the counter-command: the other way, the prompt's speed
-      p.negative_actions = world::mirrored_actions(acts, P);
-      p.negative_actions.narrow(0, P, F).select(1, 0).fill_(last_speed / world::kSpeedScale);
-    }
+    const bool commanded = !std::isnan(acts[P][0].item<float>());  // the generated steps have actions
+    if (commanded && g->action_negative == "mirror")  // the counter-command: the other way, the prompt's speed
+      p.negative_actions = world::counter_actions(acts, P, torch::tensor(last_speed));
     auto text_rows = [&](const std::string& t) {
       auto ids = info.vocab.encode(t, L.m);
       return torch::tensor(ids, torch::kLong).view({1, L.m}).repeat({steps, 1});

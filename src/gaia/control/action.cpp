@@ -110,11 +110,8 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     cmd_speed[size_t(r)] = ss / double(F);
     cmd_curv[size_t(r)] = sc / double(F);
   }
-  if (o.mirror_negative) {  // the counter-command: turn the other way at the speed the steering commands keep
-    cond.negative_actions = world::mirrored_actions(cond.actions, P - 1);
-    for (int64_t r = 0; r < R; ++r)
-      cond.negative_actions[r].narrow(0, P - 1, F + 1).select(1, 0).fill_(kept_speed[size_t(r)] / world::kSpeedScale);
-  }
+  if (o.mirror_negative)  // the counter-command: turn the other way at the speed the steering commands keep
+    cond.negative_actions = world::counter_actions(cond.actions, P - 1, torch::tensor(kept_speed));
   world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on
   null_actions.actions = cond.actions.clone();  // (a struct copy shares the tensors' storage)
   null_actions.negative_actions = torch::Tensor();  // guided towards the prompt's own actions against null ones

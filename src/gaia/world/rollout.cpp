@@ -3,6 +3,7 @@
 #include <chrono>
 
 #include "gaia/core/error.h"
+#include "gaia/world/batch.h"
 
 namespace gaia::world {
 
@@ -92,12 +93,17 @@ void check_prompt(const WorldModelImpl& m, const RolloutPrompt& p, int64_t N, in
 
 }  // namespace
 
-torch::Tensor mirrored_actions(const torch::Tensor& actions, int64_t from) {
+torch::Tensor counter_actions(const torch::Tensor& actions, int64_t from, const torch::Tensor& kept_speed) {
   auto m = actions.clone();
   const int64_t d = m.dim() - 2;  // the steps dimension
   if (d < 0 || m.size(-1) != 2 || from < 0 || from > m.size(d))
-    fail("mirrored_actions: need [steps, 2] or [futures, steps, 2] actions and a step within them");
-  m.narrow(d, from, m.size(d) - from).select(-1, 1).mul_(-1);
+    fail("counter_actions: need [steps, 2] or [futures, steps, 2] actions and a step within them");
+  auto tail = m.narrow(d, from, m.size(d) - from);
+  tail.select(-1, 1).mul_(-1);
+  if (kept_speed.defined()) {  // [] or [N], broadcast over the steps
+    auto v = kept_speed.to(m.dtype()) / kSpeedScale;
+    tail.select(-1, 0).copy_(v.dim() == 0 ? v : v.unsqueeze(-1));
+  }
   return m;
 }
 

@@ -45,10 +45,12 @@ struct RolloutResult {
   double seconds = 0;               // wall time of the rollout
 };
 
-// Negative actions that turn the other way: `actions` ([S, 2] or [N, S, 2]) with the curvature mirrored from step
-// `from` on. As RolloutPrompt::negative_actions, guidance contrasts a turn with its mirror image instead of with
-// no command, which doubles the contrast and cancels a bias both share; a straight command is then not guided.
-torch::Tensor mirrored_actions(const torch::Tensor& actions, int64_t from);
+// The counter-command, as negative actions: `actions` ([S, 2] or [N, S, 2], normalised) from step `from` on with
+// the curvature mirrored and, when `kept_speed` (m/s, [] or [N]) is defined, that speed. As
+// RolloutPrompt::negative_actions, guidance contrasts a turn with its mirror image and a speed change with keeping
+// the speed, instead of either with no command: the contrast doubles and a bias both share cancels. A straight
+// command at the kept speed is then not guided.
+torch::Tensor counter_actions(const torch::Tensor& actions, int64_t from, const torch::Tensor& kept_speed = {});
 
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int generated, int total)>& on_frame = {});
