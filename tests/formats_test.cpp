@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "test_util.h"
@@ -148,6 +149,19 @@ TEST(Npy, CorruptFilesFailWithClearErrors) {
   cplx.replace(cplx.find("<f4"), 3, "<c8");
   write_raw(dir / "c.npy", cplx);
   EXPECT_NE(error_of([&] { npy_read(dir / "c.npy"); }).find("unsupported .npy dtype"), std::string::npos);
+}
+
+TEST(JsonFile, ParsesOrNamesTheFile) {
+  test::TempDir dir;
+  write_raw(dir / "ok.json", "{\"step\": 7, \"ids\": [\"a\", \"b\"]}");
+  const auto j = read_json(dir / "ok.json");
+  EXPECT_EQ(j.at("step").get<int>(), 7);
+  EXPECT_EQ(j.at("ids").size(), 2u);
+  write_raw(dir / "torn.json", "{\"step\": 7, \"ids\": [\"a\"");
+  const std::string e = error_of([&] { read_json(dir / "torn.json"); });
+  EXPECT_EQ(e.rfind((dir / "torn.json").string() + ": invalid JSON (", 0), 0u) << e;
+  EXPECT_EQ(e.find('\n'), std::string::npos) << "one line";
+  EXPECT_NE(error_of([&] { read_json(dir / "missing.json"); }).find("missing.json: cannot open file"), std::string::npos);
 }
 
 // Cross-checks against a peer: files written by numpy and by torch (tools/make_format_fixtures.py).

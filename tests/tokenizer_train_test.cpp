@@ -320,6 +320,13 @@ TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   EXPECT_NE(m.output.find("dataset.json: exists with a different tokenizer grid, codebook, rate or --mirror"),
             std::string::npos) << m.output;
   EXPECT_FALSE(fs::exists(dir / "tok" / "episodes" / (ds.ids()[0] + "-mirror")));
+  // A torn header is one error line naming it, not a bare parser message; nothing is written.
+  write_file_atomic(dir / "tok" / "dataset.json", "{\"grid\": [4,");
+  auto torn = test::run_gaia("tokenize '" + (dir / "ds").string() + "' --tokenizer '" +
+                             (dir / "run" / "tokenizer.safetensors").string() + "' --out '" + (dir / "tok").string() + "'");
+  EXPECT_NE(torn.status, 0);
+  EXPECT_NE(torn.output.find("tok/dataset.json: invalid JSON"), std::string::npos) << torn.output;
+  EXPECT_EQ(read_file(dir / "tok" / "dataset.json"), "{\"grid\": [4,");
 }
 
 TEST(TokenizerEval, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {

@@ -9,6 +9,7 @@
 #include "gaia/control/rollouts.h"
 #include "gaia/control/text.h"
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/progress.h"
 #include "gaia/report/report.h"
 #include "gaia/torch/tensor_io.h"
@@ -141,7 +142,7 @@ void register_eval(CLI::App& app) {
     if (!e->world_eval.empty()) {
       // The likelihood side from `gaia world eval`: bits/token against the compressors and Fig. 5.
       fs::path we = e->world_eval;
-      auto wj = nlohmann::json::parse(read_file(we / "eval.json"));
+      auto wj = read_json(we / "eval.json");
       j["world_model"] = wj;
       nlohmann::json sec = {{"title", "World model likelihood"},
                             {"text", "Held-out cross-entropy of the image tokens, against xz -9 and zstd -19 on the "

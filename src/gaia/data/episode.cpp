@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 
 namespace gaia::data {
@@ -20,15 +21,6 @@ json nan_to_null(double v) { return std::isnan(v) ? json(nullptr) : json(v); }
 
 double null_to_nan(const json& j) {
   return j.is_number() ? j.get<double>() : std::numeric_limits<double>::quiet_NaN();
-}
-
-json read_json(const fs::path& p) {
-  std::string text = read_file(p);
-  try {
-    return json::parse(text);
-  } catch (const std::exception& e) {
-    fail("{}: invalid JSON ({})", p.string(), e.what());
-  }
 }
 
 }  // namespace

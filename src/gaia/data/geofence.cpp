@@ -4,6 +4,7 @@
 #include <random>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/data/mirror.h"
 #include "gaia/data/signals.h"
 
@@ -75,13 +76,7 @@ bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {
 }
 
 Split read_split(const fs::path& f) {
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(read_file(f));
-  } catch (const nlohmann::json::exception& e) {
-    fail("{}: invalid JSON ({})", f.string(), e.what());
-  }
-  return Split::from_json(j, f.string());
+  return Split::from_json(read_json(f), f.string());
 }
 
 Split load_or_default_split(const Dataset& ds, double frac, uint64_t seed) {

@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/episode.h"
@@ -38,7 +39,7 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
                  {"tokenizer", weights.filename().string()}, {"source", dataset.string()}, {"mirror", mirror}};
   fs::path hf = out / "dataset.json";
   if (fs::exists(hf)) {
-    json old = json::parse(read_file(hf));
+    json old = read_json(hf);
     if (old.value("grid", json()) != header["grid"] || old.value("codebook_size", 0) != c.tokenizer.codebook_size ||
         old.value("rate_hz", 0.0) != rate || old.value("mirror", false) != mirror)
       fail("{}: exists with a different tokenizer grid, codebook, rate or --mirror; use a new --out", hf.string());

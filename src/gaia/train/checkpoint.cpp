@@ -2,6 +2,7 @@
 
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::train {
@@ -38,12 +39,7 @@ CheckpointState load_checkpoint(const fs::path& dir, const std::vector<std::pair
       fail("{}: corrupt optimiser state ({})", p.string(), e.what_without_backtrace());
     }
   }
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(read_file(dir / "state.json"));
-  } catch (const nlohmann::json::exception& e) {
-    fail("{}: invalid JSON ({})", (dir / "state.json").string(), e.what());
-  }
+  const nlohmann::json j = read_json(dir / "state.json");
   CheckpointState s;
   s.step = j.value("step", 0);
   s.extra = j.value("extra", nlohmann::json::object());

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 #include "gaia/train/checkpoint.h"
 
@@ -17,15 +18,6 @@ using nlohmann::json;
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-
-json read_json(const fs::path& p) {
-  std::string text = read_file(p);
-  try {
-    return json::parse(text);
-  } catch (const std::exception& e) {
-    fail("{}: invalid JSON ({})", p.string(), e.what());
-  }
-}
 
 std::vector<std::string> read_jsonl_strings(const fs::path& p) {
   std::string text = read_file(p);
