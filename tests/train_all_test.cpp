@@ -39,6 +39,13 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.token_blocks=2"), std::string::npos);
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.ema_decay=0.999"), std::string::npos);
   EXPECT_NE(log[6]["command"].get<std::string>().find("tokenizer-refine"), std::string::npos);  // tokens use its codes
+  // ... and every drive again in mirror image, held out with its source.
+  EXPECT_TRUE(nlohmann::json::parse(read_file(d / "runs" / "tokens" / "dataset.json"))["mirror"].get<bool>());
+  int mirrored = 0, plain = 0;
+  for (auto& e : fs::directory_iterator(d / "runs" / "tokens" / "episodes"))
+    (e.path().filename().string().find("-mirror") != std::string::npos ? mirrored : plain)++;
+  EXPECT_EQ(plain, 6);
+  EXPECT_EQ(mirrored, 6);
   EXPECT_NE(log[7]["command"].get<std::string>().find("world train"), std::string::npos);
   EXPECT_NE(log[7]["command"].get<std::string>().find("--steps 4"), std::string::npos);
   // The procedural data: 3 lane-keeping episodes, 2 more whose driver wanders and 1 whose driver also swerves

@@ -24,7 +24,7 @@ struct EvalFlags {
       action_negative = "mirror";
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
-  std::vector<double> scales{0.0, 1.0, 2.0, 4.0};
+  std::vector<double> scales = control::TextEvalOptions{}.scales;
   std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
 };
 
@@ -53,7 +53,7 @@ void register_eval(CLI::App& app) {
                   "the unconditional branch of action guidance: mirror (the counter-command: turning the other way, "
                   "at the kept speed; default) or null (no actions, eq. 2 as in the paper)")
       ->check(CLI::IsMember({"null", "mirror"}));
-  cmd->add_option("--scales", e->scales, "guidance scales for text control, e.g. 0,1,2,4")->delimiter(',');
+  cmd->add_option("--scales", e->scales, "guidance scales for text control (default 0,1,2,4,8; the last also with the negative prompt and the schedules)")->delimiter(',');
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
   cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")

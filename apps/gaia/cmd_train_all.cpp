@@ -102,7 +102,9 @@ void register_train_all(CLI::App& app) {
          out / "tokenizer" / "tokenizer.safetensors"},
         {"tokenizer-ft", no_gan_run((out / "tokenizer" / "tokenizer.safetensors").string(), st->finetune, "tokenizer-ft", {}),
          tok_ft},
-        {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--out", tokens}), out / "tokens" / "dataset.json"},
+        // Every drive also in mirror image (data/mirror.h): the world model then sees as many right turns as left
+        // ones, and the shipped model's steering reaches its targets with them (MODEL_CARD.md, "World model").
+        {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
          world},
         {"decoder",
