@@ -53,7 +53,10 @@ void register_eval(CLI::App& app) {
                   "the unconditional branch of action guidance: mirror (the counter-command: turning the other way, "
                   "at the kept speed; default) or null (no actions, eq. 2 as in the paper)")
       ->check(CLI::IsMember({"null", "mirror"}));
-  cmd->add_option("--scales", e->scales, "guidance scales for text control (default 0,1,2,4,8; the last also with the negative prompt and the schedules)")->delimiter(',');
+  cmd->add_option("--scales", e->scales,
+                  "guidance scales for text control (default 0,1,2,4,8; the last also runs with the negative prompt "
+                  "and with the schedules)")
+      ->delimiter(',');
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
   cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")
