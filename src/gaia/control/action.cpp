@@ -110,12 +110,11 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     cmd_speed[size_t(r)] = ss / double(F);
     cmd_curv[size_t(r)] = sc / double(F);
   }
+  world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on,
+  null_actions.actions = cond.actions.clone();  // guided towards the prompt's own actions against null ones
+  null_actions.actions.narrow(1, P - 1, F + 1).fill_(std::nan(""));  // (a struct copy shares the tensors' storage)
   if (o.mirror_negative)  // the counter-command: turn the other way at the speed the steering commands keep
     cond.negative_actions = world::counter_actions(cond.actions, P - 1, torch::tensor(kept_speed));
-  world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on
-  null_actions.actions = cond.actions.clone();  // (a struct copy shares the tensors' storage)
-  null_actions.negative_actions = torch::Tensor();  // guided towards the prompt's own actions against null ones
-  null_actions.actions.narrow(1, P - 1, F + 1).fill_(std::nan(""));
 
   world::RolloutOptions ro;
   ro.frames = int(F);
