@@ -1,5 +1,8 @@
 // The video decoder end to end through the CLI on tiny data: synth -> tokenizer -> decoder train (interrupted and
 // resumed: identical weights to an uninterrupted run) -> decode (MP4, GIF, PNG; --fast) -> eval, and bad inputs.
+#include <algorithm>
+#include <sstream>
+
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
@@ -148,6 +151,38 @@ TEST(DecoderCli, BadInputsAreClearErrors) {
 
 // Fine-tuning (--init): with a zero learning rate the run keeps the given weights (up to the EMA's rounding); a file
 // that is not a video decoder is one clear error.
+// decoder.train_max_time: every training step's noise level (metrics.jsonl "t") is drawn below it; the default
+// draws from all of [0, 1]; out of range is one error naming the key.
+TEST(DecoderCli, TrainDrawsNoiseLevelsBelowTrainMaxTime) {
+  auto& p = DecoderPipeline::get();
+  const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --val-every 100 --steps 8";
+  auto times = [](const fs::path& metrics) {
+    std::vector<double> t;
+    std::istringstream in(read_file(metrics));
+    for (std::string line; std::getline(in, line);)
+      if (!line.empty()) t.push_back(nlohmann::json::parse(line).at("t").get<double>());
+    return t;
+  };
+  auto r = test::run_gaia(base + " --set decoder.train_max_time=0.3 --out " + q(p.dir / "tmax"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto low = times(p.dir / "tmax" / "metrics.jsonl");
+  ASSERT_EQ(low.size(), 8u);
+  for (double t : low) {
+    EXPECT_GE(t, 0.0);
+    EXPECT_LE(t, 0.3);
+  }
+  r = test::run_gaia(base + " --out " + q(p.dir / "tfull"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto full = times(p.dir / "tfull" / "metrics.jsonl");
+  ASSERT_EQ(full.size(), 8u);
+  EXPECT_GT(*std::max_element(full.begin(), full.end()), 0.3);  // same seed, same draws, scaled by 1 / 0.3
+  for (size_t i = 0; i < full.size(); ++i) EXPECT_NEAR(low[i], 0.3 * full[i], 1e-9) << i;
+  r = test::run_gaia(base + " --set decoder.train_max_time=0 --out " + q(p.dir / "tbad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("decoder.train_max_time"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "tbad" / "metrics.jsonl"));
+}
+
 TEST(DecoderCli, InitStartsFromTheGivenWeights) {
   auto& p = DecoderPipeline::get();
   const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --val-every 100";

@@ -118,6 +118,10 @@ struct DecoderConfig {
   // closer to the true frames than at 1 (within 0.2 dB of the tokenizer decoder at 6.25 Hz), at 5 DDIM steps as
   // well as 50, and sharper than the tokenizer decoder (MODEL_CARD.md, "Video decoder").
   double start_time = 0.3;
+  // Training draws each window's noise level t ~ U(0, train_max_time) (paper: 1, every level). A sampler that
+  // starts at start_time < 1 never asks the model about t above it, so a CPU-sized model can spend all of its
+  // training on the levels it is sampled at.
+  double train_max_time = 1.0;
   double w_l1 = 0.1, w_l2 = 1.0;  // paper §4.3
   double ema_decay = 0.999;      // paper §4.3
   // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6 (batch 64, 300k

@@ -168,7 +168,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     save_decoder(ema, cfg, opt.out / "latest.safetensors");  // usable EMA weights so far (gaia decode, decoder eval)
   };
   // Validation: v loss of the EMA weights on fixed held-out clips (video task, 6.25 Hz) at t' = 0.25, 0.5, 0.75
-  // with fixed noise, and the PSNR of the one-step estimate x_hat at t' = 0.5.
+  // of the trained range (decoder.train_max_time) with fixed noise, and the PSNR of the one-step estimate x_hat at
+  // its middle.
   auto validate = [&]() {
     nlohmann::json v;
     if (val_refs.empty()) return v;
@@ -176,19 +177,20 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     ema->eval();
     auto clips = load_clips(val.episodes, val_refs, tok, dc.cond_image, dev);
     double loss = 0, psnr = 0;
-    for (double t : {0.25, 0.5, 0.75}) {
+    for (double f : {0.25, 0.5, 0.75}) {
+      const double t = f * dc.train_max_time;
       torch::manual_seed(cfg.run.seed + 12345);
       auto b = make_task_batch(clips, task_masks(Task::kVideo, T), 0, t, 0.0, noise, K, D, dc.interp_base);
       auto vp = ema->forward(b.input);
       loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
-      if (t == 0.5) {
+      if (f == 0.5) {
         auto tt = torch::full({1}, t);
         auto x_hat = x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)) + coarse_base(b.input.cond_image, clips.frames);
         psnr = psnr_pm1(x_hat, clips.frames);
       }
     }
     v["loss"] = loss;
-    v["x0_psnr"] = psnr;  // PSNR of the one-step estimate of x0 at t = 0.5
+    v["x0_psnr"] = psnr;  // PSNR of the one-step estimate of x0 in the middle of the trained range
     return v;
   };
 
@@ -203,7 +205,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     std::uniform_int_distribution<size_t> pick(0, pool.size() - 1);
     for (int i = 0; i < dc.batch_size; ++i) refs.push_back(pool[pick(rng)]);
     auto clips = load_clips(train.episodes, refs, tok, dc.cond_image, dev);
-    const double t = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
+    const double t = std::uniform_real_distribution<double>(0.0, dc.train_max_time)(rng);
     auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D,
                              dc.interp_base);
     const double lr = sched(step);
@@ -231,7 +233,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       result.last_val = log.val;
     }
     const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn}, {"task", log.task},
-                               {"seconds", log.seconds}, {"val", log.val}});
+                               {"t", t}, {"seconds", log.seconds}, {"val", log.val}});
     if (on_step) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }
