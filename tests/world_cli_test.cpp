@@ -3,6 +3,8 @@
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include "gaia/core/npy.h"
@@ -250,7 +252,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   const int64_t K = probe::load_probe(models / "probe-dynamics.safetensors", torch::kCPU)->frames;
   auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames " +
                           std::to_string(K - 1) + " --futures 2" +
-                          " --text-frames 1 --scales 0,2 --long-seconds 2 --window-seconds 1 --action-guidance 1.5 --out " +
+                          " --text-frames 1 --scales 0,2 --long-seconds 2 --window-seconds 1 --long-rollouts 2 --action-guidance 1.5 --out " +
                           q(p.dir / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
@@ -299,10 +301,28 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     EXPECT_GE(s["within_10_percent_of_mean"].get<double>(), 0.0) << k;
     EXPECT_LE(s["within_10_percent_of_mean"].get<double>(), 1.0) << k;
   }
+  // Two rollouts from two held-out prompts: each window's statistic is the mean of the two rollouts' windows, the
+  // pooled one the mean over every window, and the within-10% verdicts follow from the numbers.
+  EXPECT_EQ(lr["rollouts"].get<int>(), 2);
+  EXPECT_GE(lr["prompt_episodes"].get<int>(), 1);  // the tiny set may have one held-out drive for both
+  EXPECT_LE(lr["prompt_episodes"].get<int>(), 2);
+  double pooled = 0, worst = 0;
   for (const auto& w : lr["windows"]) {
     EXPECT_GE(w["copy_rate"].get<double>(), 0.0);
     EXPECT_LE(w["entropy_bits"].get<double>(), 8.0 + 1e-9);  // K = 256
+    const auto& per = w["copy_rate_per_rollout"];
+    ASSERT_EQ(per.size(), 2u);
+    EXPECT_NEAR(w["copy_rate"].get<double>(), (per[0].get<double>() + per[1].get<double>()) / 2, 1e-12);
+    // The standard error of a mean of two: |a - b| / 2.
+    EXPECT_NEAR(w["copy_rate_std_error"].get<double>(), std::abs(per[0].get<double>() - per[1].get<double>()) / 2, 1e-12);
+    pooled += w["copy_rate"].get<double>() / double(lr["windows"].size());
+    worst = std::max({worst, std::abs(w["copy_rate_vs_real"].get<double>()), std::abs(w["entropy_vs_real"].get<double>())});
   }
+  EXPECT_NEAR(lr["pooled"]["copy_rate"].get<double>(), pooled, 1e-12);
+  EXPECT_NEAR(lr["pooled"]["copy_rate_vs_real"].get<double>(), pooled / lr["real_copy_rate"].get<double>() - 1, 1e-9);
+  EXPECT_NEAR(lr["max_relative_difference"].get<double>(), worst, 1e-12);
+  EXPECT_EQ(lr["within_10_percent"].get<bool>(), worst <= 0.10);
+  EXPECT_GT(lr["real_copy_rate_std_error"].get<double>() + lr["real_entropy_bits_std_error"].get<double>(), 0.0);
   for (const char* f : {"report.html", "report.json", "videos/action_generated.gif", "videos/action_counterfactual.gif",
                         "videos/text_prompts.gif", "videos/futures.gif", "videos/long_rollout.gif",
                         "plots/action_curvature.svg", "plots/text_guidance.svg", "plots/long_rollout.svg"})
@@ -339,6 +359,10 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     EXPECT_NE(r.status, 0);
     EXPECT_NE(r.output.find("--frames must be at least " + std::to_string(K - 1)), std::string::npos) << r.output;
   }
+  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --long-rollouts 0 --out " + q(p.dir / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--long-rollouts must be at least 1, got 0"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad" / "eval.json"));
   r = test::run_gaia(base + " --only action,bogus --out " + q(p.dir / "bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--only: unknown part 'bogus'"), std::string::npos) << r.output;

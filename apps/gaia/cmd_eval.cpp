@@ -23,6 +23,7 @@ struct EvalFlags {
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
       action_negative = "mirror";
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
+  int long_rollouts = control::RolloutEvalOptions{}.long_rollouts;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
   std::vector<double> scales = control::TextEvalOptions{}.scales;
   std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
@@ -59,6 +60,9 @@ void register_eval(CLI::App& app) {
       ->delimiter(',');
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
+  cmd->add_option("--long-rollouts", e->long_rollouts,
+                  "long rollouts, each from another held-out prompt, run as one batch; their window statistics are "
+                  "averaged (one drive's windows vary as much as real drives do)");
   cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")
       ->take_all();
   cmd->add_option("--plot", e->plots, "an extra SVG plot for the report (e.g. the balance.svg of gaia data stats)")
@@ -79,6 +83,8 @@ void register_eval(CLI::App& app) {
       parts.insert(p);
       a = b + 1;
     }
+    if (parts.count("long") && e->long_rollouts < 1)  // before any model is loaded or part is run
+      fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
     auto m = control::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
     apply_sampling_sets(*flags, "world", {"world.top_k", "world.temperature", "world.guide_actions_within_top_k"}, e->world, m.info.config);  // --top-k still wins
@@ -131,6 +137,7 @@ void register_eval(CLI::App& app) {
     ro.futures = e->futures;
     ro.long_seconds = e->long_seconds;
     ro.window_seconds = e->window_seconds;
+    ro.long_rollouts = e->long_rollouts;
     ro.sampling = sampling;
     ro.seed = uint64_t(run.run.seed);
     if (parts.count("futures")) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
@@ -108,33 +109,46 @@ nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const
 nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out) {
   const double rate = ds.rate_hz() > 0 ? ds.rate_hz() : 6.25;
   const int64_t P = o.prompt_frames, F = int64_t(std::lround(o.long_seconds * rate));
-  const int64_t W = int64_t(std::lround(o.window_seconds * rate));
+  const int64_t W = int64_t(std::lround(o.window_seconds * rate)), R = o.long_rollouts;
   if (F < W) fail("--long-seconds {} is shorter than one {} s window", o.long_seconds, o.window_seconds);
-  auto pr = held_out_prompts(ds, 1, P, P, m.info.config.run.seed);
+  if (R < 1) fail("--long-rollouts must be at least 1, got {}", R);
+  auto pr = held_out_prompts(ds, int(R), P, P, m.info.config.run.seed);  // spread over the held-out drives
   world::RolloutPrompt p;
-  p.tokens = pr.tokens[0];
+  p.tokens = pr.tokens;  // [R, P, n]: one prompt per rollout
   world::RolloutOptions ro;
   ro.frames = int(F);
+  ro.futures = int(R);
   ro.sampling = o.sampling;
   ro.seed = o.seed + 2;
-  ProgressBar bar(F, "long rollout");
+  ProgressBar bar(F, R > 1 ? fmt::format("long rollouts ({} at once)", R) : std::string("long rollout"));
   auto r = world::rollout(m.world, p, ro, [&](int done, int) { bar.update(done); });
   bar.finish();
-  auto gen = r.tokens[0].narrow(0, P, F);  // [F, n]
-  auto frames = decode(m, gen.unsqueeze(0))[0];
+  auto gen = r.tokens.narrow(1, P, F);  // [R, F, n]
+  auto frames = decode(m, gen);         // [R][F]
   auto real = real_reference(m, ds, W, 256, m.info.config.run.seed);
   if (real.windows.empty()) fail("{}: no held-out episode is {} s long (the statistics window)", ds.path().string(), o.window_seconds);
-  double real_copy = 0, real_entropy = 0;
+  auto mean_of = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x / double(v.size());
+    return s;
+  };
+  // Standard error of a mean of independent draws (0 for one draw: no spread to measure).
+  auto std_error = [&](const std::vector<double>& v) {
+    if (v.size() < 2) return 0.0;
+    const double mu = mean_of(v);
+    double ss = 0;
+    for (double x : v) ss += (x - mu) * (x - mu);
+    return std::sqrt(ss / double(v.size() - 1) / double(v.size()));
+  };
   std::vector<double> real_copies, real_entropies;
   for (auto& w : real.windows) {
     real_copies.push_back(copy_rate(w));
     real_entropies.push_back(unigram_entropy_bits(w, m.info.K));
-    real_copy += real_copies.back() / double(real.windows.size());
-    real_entropy += real_entropies.back() / double(real.windows.size());
   }
+  const double real_copy = mean_of(real_copies), real_entropy = mean_of(real_entropies);
   // How much real windows themselves vary: the 10th / 50th / 90th percentile of each statistic over the real
-  // windows, and the fraction of real windows within 10% of the real mean (what the per-window target asks of a
-  // generated window, asked of real video).
+  // windows, and the fraction of real windows within 10% of the real mean (what the per-window target would ask of
+  // a single generated window, asked of real video).
   auto spread = [](std::vector<double> v, double mean) {
     std::sort(v.begin(), v.end());
     auto q = [&](double f) { return v[size_t(std::lround(f * double(v.size() - 1)))]; };
@@ -144,17 +158,27 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
     return nlohmann::json{{"p10", q(0.1)}, {"p50", q(0.5)}, {"p90", q(0.9)}, {"within_10_percent_of_mean", within}};
   };
   nlohmann::json windows = nlohmann::json::array();
-  std::vector<double> xs;
+  std::vector<double> xs, all_copies, all_entropies;
   eval::Series s_copy{"copy rate (generated)", {}, ""}, s_copy_real{"copy rate (real)", {}, ""};
   eval::Series s_ent{"entropy / 10 bits (generated)", {}, ""}, s_ent_real{"entropy / 10 bits (real)", {}, ""};
   double worst = 0;
   for (int64_t s = 0; s + W <= F; s += W) {
-    auto w = gen.narrow(0, s, W);
-    const double c = copy_rate(w), e = unigram_entropy_bits(w, m.info.K);
-    const double fd = probe::frechet_distance(
-        scene_features(m, std::vector<cv::Mat>(frames.begin() + s, frames.begin() + s + W)), real.features);
-    windows.push_back({{"from_s", double(s) / rate}, {"copy_rate", c}, {"entropy_bits", e}, {"fd_probe_to_real", fd},
-                       {"copy_rate_vs_real", c / real_copy - 1}, {"entropy_vs_real", e / real_entropy - 1}});
+    std::vector<double> cs, es;  // this window of every rollout
+    std::vector<cv::Mat> window_frames;
+    for (int64_t k = 0; k < R; ++k) {
+      auto w = gen[k].narrow(0, s, W);
+      cs.push_back(copy_rate(w));
+      es.push_back(unigram_entropy_bits(w, m.info.K));
+      window_frames.insert(window_frames.end(), frames[size_t(k)].begin() + s, frames[size_t(k)].begin() + s + W);
+    }
+    all_copies.insert(all_copies.end(), cs.begin(), cs.end());
+    all_entropies.insert(all_entropies.end(), es.begin(), es.end());
+    const double c = mean_of(cs), e = mean_of(es);
+    const double fd = probe::frechet_distance(scene_features(m, window_frames), real.features);
+    windows.push_back({{"from_s", double(s) / rate}, {"copy_rate", c}, {"copy_rate_std_error", std_error(cs)},
+                       {"copy_rate_per_rollout", cs}, {"entropy_bits", e}, {"entropy_bits_std_error", std_error(es)},
+                       {"fd_probe_to_real", fd}, {"copy_rate_vs_real", c / real_copy - 1},
+                       {"entropy_vs_real", e / real_entropy - 1}});
     worst = std::max({worst, std::abs(c / real_copy - 1), std::abs(e / real_entropy - 1)});
     xs.push_back(double(s) / rate);
     s_copy.y.push_back(c);
@@ -162,28 +186,57 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
     s_ent.y.push_back(e / 10);
     s_ent_real.y.push_back(real_entropy / 10);
   }
+  // Every generated window against every real one: the minute as a whole. The rollouts are independent draws; the
+  // windows of one rollout are not, so the standard error is over the rollouts' own means.
+  std::vector<double> rollout_copies, rollout_entropies;
+  const size_t per = all_copies.size() / size_t(R);
+  for (int64_t k = 0; k < R; ++k) {
+    double c = 0, e = 0;
+    for (size_t i = 0; i < per; ++i) {
+      c += all_copies[i * size_t(R) + size_t(k)] / double(per);
+      e += all_entropies[i * size_t(R) + size_t(k)] / double(per);
+    }
+    rollout_copies.push_back(c);
+    rollout_entropies.push_back(e);
+  }
+  const double pooled_copy = mean_of(all_copies), pooled_entropy = mean_of(all_entropies);
+  const double pooled_worst = std::max(std::abs(pooled_copy / real_copy - 1), std::abs(pooled_entropy / real_entropy - 1));
   nlohmann::json j = {{"seconds", o.long_seconds},
                       {"frames", F},
-                      {"generated_frames_per_second", double(F) / r.seconds},
+                      {"rollouts", R},
+                      {"prompt_episodes", std::set<size_t>(pr.episodes.begin(), pr.episodes.end()).size()},
+                      {"generated_frames_per_second", double(R * F) / r.seconds},
                       {"real_copy_rate", real_copy},
+                      {"real_copy_rate_std_error", std_error(real_copies)},
                       {"real_entropy_bits", real_entropy},
+                      {"real_entropy_bits_std_error", std_error(real_entropies)},
                       {"real_windows", real.windows.size()},
                       {"real_copy_rate_spread", spread(real_copies, real_copy)},
                       {"real_entropy_bits_spread", spread(real_entropies, real_entropy)},
                       {"windows", windows},
+                      {"pooled", {{"copy_rate", pooled_copy},
+                                  {"copy_rate_std_error", std_error(rollout_copies)},
+                                  {"copy_rate_vs_real", pooled_copy / real_copy - 1},
+                                  {"entropy_bits", pooled_entropy},
+                                  {"entropy_bits_std_error", std_error(rollout_entropies)},
+                                  {"entropy_vs_real", pooled_entropy / real_entropy - 1},
+                                  {"within_10_percent", pooled_worst <= 0.10}}},
                       {"max_relative_difference", worst},
                       {"within_10_percent", worst <= 0.10}};
-  out.text("plots/long_rollout.svg", eval::svg_lines("token statistics per window of a long rollout", xs,
-                                                     {s_copy, s_copy_real, s_ent, s_ent_real}, "seconds", ""));
-  std::vector<cv::Mat> every;  // every other frame, played at half speed: the minute in 30 s
-  for (size_t k = 0; k < frames.size(); k += 2) every.push_back(frames[k]);
+  out.text("plots/long_rollout.svg",
+           eval::svg_lines(fmt::format("token statistics per window, mean of {} long rollout{}", R, R > 1 ? "s" : ""),
+                           xs, {s_copy, s_copy_real, s_ent, s_ent_real}, "seconds", ""));
+  std::vector<cv::Mat> every;  // the first rollout, every other frame, played at half speed: the minute in 30 s
+  for (size_t k = 0; k < frames[0].size(); k += 2) every.push_back(frames[0][k]);
   out.gif("videos/long_rollout.gif", every, rate / 2);
   out.sections.push_back(
       {{"title", "Long rollout"},
-       {"text", fmt::format("{} s generated from a {}-frame prompt with the sliding window (context {} steps); "
-                            "statistics per {} s window against real held-out token episodes.",
-                            o.long_seconds, P, m.info.config.world.context_steps, o.window_seconds)},
-       {"videos", {{{"caption", "a minute of driving (every other frame)"},
+       {"text", fmt::format("{} long rollout{} of {} s, each from a {}-frame prompt of another held-out drive, with the "
+                            "sliding window (context {} steps); statistics per {} s window, averaged over the "
+                            "rollouts, against real held-out token episodes.",
+                            R, R > 1 ? "s" : "", o.long_seconds, P, m.info.config.world.context_steps,
+                            o.window_seconds)},
+       {"videos", {{{"caption", "a minute of driving (the first rollout, every other frame)"},
                     {"items", {{{"label", "long rollout"}, {"path", "videos/long_rollout.gif"}}}}}}},
        {"plots", {{{"caption", "copy rate and unigram entropy per window"}, {"path", "plots/long_rollout.svg"}}}},
        {"metrics", j}});

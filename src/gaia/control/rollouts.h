@@ -2,9 +2,12 @@
 // Multiple futures and long rollouts (§5 of the paper shows both as videos):
 //   futures   N futures from one held-out prompt: how different they are (mean pairwise token distance) while
 //             staying plausible (FD-probe of their frames to real held-out frames, with real-vs-real as the floor)
-//   long      a minute of driving with the sliding window: per 10 s window, the copy rate (tokens equal to the
-//             previous frame's at the same position), the unigram entropy of the tokens and FD-probe to real
-//             frames, against the same statistics of real held-out token episodes: no collapse into repetition
+//   long      a minute of driving with the sliding window, from several held-out prompts at once: per 10 s window,
+//             the copy rate (tokens equal to the previous frame's at the same position), the unigram entropy of
+//             the tokens and FD-probe to real frames, averaged over the rollouts, against the same statistics of
+//             real held-out token episodes: no collapse into repetition and no drift. One drive's windows vary as
+//             much as real drives do (a stop at a junction copies twice as much as the mean), so the comparison is
+//             of means, each with its standard error
 #include "gaia/control/common.h"
 #include "gaia/world/sampling.h"
 
@@ -14,6 +17,7 @@ struct RolloutEvalOptions {
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4;
   double long_seconds = 60;     // 0 skips the long rollout
   double window_seconds = 10;
+  int long_rollouts = 8;        // long rollouts, each from another held-out prompt, batched
   world::SamplingOptions sampling;
   uint64_t seed = 0;
 };
