@@ -9,6 +9,7 @@
 #include "gaia/core/config.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/decoder/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "test_util.h"
 
@@ -106,6 +107,22 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   EXPECT_EQ(j1["start_time"].get<double>(), 0.6);
   EXPECT_EQ(j["start_time"].get<double>(), gaia::Config().decoder.start_time);  // the built-in default
   EXPECT_NE(j1["video_decoder"]["2"]["psnr_25hz"].get<double>(), j["video_decoder"]["2"]["psnr_25hz"].get<double>());
+  // --token-fps 25: the video decoder gets every frame's tokens (no upsampling windows), as the tokenizer decoder
+  // does; the baselines do not change, the video decoder's frames do. Another rate is one clear error.
+  r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                     " --clips 1 --token-frames 3 --steps 2 --token-fps 25" + p.tiny() + " --out " + q(p.dir / "eval-25"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j25 = nlohmann::json::parse(read_file(p.dir / "eval-25" / "eval.json"));
+  EXPECT_EQ(j25["token_fps"].get<double>(), 25.0);
+  EXPECT_EQ(j["token_fps"].get<double>(), 6.25);
+  EXPECT_EQ(j25["frames_25hz"].get<int>(), 9);
+  EXPECT_EQ(j25["tokenizer_decoder"]["psnr_25hz"].get<double>(), j["tokenizer_decoder"]["psnr_25hz"].get<double>());
+  EXPECT_NE(j25["video_decoder"]["2"]["psnr_25hz"].get<double>(), j["video_decoder"]["2"]["psnr_25hz"].get<double>());
+  r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                     " --clips 1 --token-frames 3 --steps 2 --token-fps 10" + p.tiny() + " --out " + q(p.dir / "eval-10"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--token-fps must be 6.25, 12.5 or 25, got 10"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "eval-10" / "eval.json"));
   r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
                      q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 1 --set decoder.channels=64" + p.tiny() +
                      " --out " + q(p.dir / "out2" / "video.mp4"));
@@ -206,6 +223,31 @@ TEST(DecoderCli, InitStartsFromTheGivenWeights) {
   for (const auto& n : a.names())
     differs = differs || !torch::allclose(tensor_from_view(a.get(n)), tensor_from_view(c.get(n)), 1e-3, 1e-3);
   EXPECT_TRUE(differs);
+  // Temporal attention the --init weights lack (tiny has it at levels 0 and 1; here the init has it at level 1 only)
+  // starts as the identity: at learning rate 0 the grown network predicts exactly what the given one does.
+  r = test::run_gaia(base + " --steps 2 --set decoder.temporal_levels=[1] --out " + q(p.dir / "init-t1"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(base + " --steps 2 --set decoder.lr=0 --set decoder.final_lr=0 --init " +
+                     q(p.dir / "init-t1" / "decoder.safetensors") + " --out " + q(p.dir / "init-t01"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  {
+    auto small = decoder::load_decoder(p.dir / "init-t1" / "decoder.safetensors", torch::kCPU);
+    auto grown = decoder::load_decoder(p.dir / "init-t01" / "decoder.safetensors", torch::kCPU);
+    EXPECT_EQ(grown->cfg.temporal_levels, (std::vector<int>{0, 1}));
+    EXPECT_GT(grown->parameter_count(), small->parameter_count());
+    torch::manual_seed(1);
+    decoder::DenoiserInput in;
+    in.x = torch::randn({1, 3, 3, 32, 64});
+    in.context = torch::zeros({1, 3});
+    in.tokens = torch::randint(0, small->K, {1, 3, 32 / small->D, 64 / small->D}, torch::kLong);
+    if (small->cfg.cond_image) in.cond_image = torch::randn({1, 3, 3, 32, 64});
+    in.time = torch::full({1, 3}, 0.5);
+    in.rate = torch::zeros({1}, torch::kLong);
+    torch::NoGradGuard ng;
+    auto vs = small->forward(in), vg = grown->forward(in);
+    EXPECT_GT(vs.abs().max().item<double>(), 1e-4);  // not trivially zero
+    EXPECT_TRUE(torch::allclose(vg, vs, 1e-5, 1e-6));
+  }
   r = test::run_gaia(base + " --steps 2 --init " + q(p.tok / "tokenizer.safetensors") + " --out " + q(p.dir / "init-bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("not a gaia video decoder"), std::string::npos) << r.output;

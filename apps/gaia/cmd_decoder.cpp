@@ -126,6 +126,9 @@ void register_decoder(CLI::App& app) {
     cmd->add_option("--clips", eo->clips, "held-out clips");
     cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip");
     cmd->add_option("--steps", *steps, "DDIM step counts to compare, e.g. 50,20,10");
+    cmd->add_option("--token-fps", eo->token_fps,
+                    "rate of the tokens the video decoder gets: 6.25 (the world model's; upsampled to 25 Hz), 12.5, "
+                    "or 25 (every frame's own, as the tokenizer decoder gets them)");
     add_shared_flags(cmd, flags.get(), "output directory (eval.json)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);

@@ -71,7 +71,11 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
   DecodeOptions d;
   d.sample = sample_options(cfg.decoder, 0, o.seed);
-  const int windows = count_windows(N, cfg.decoder.frames, 6.25, 25.0);
+  d.token_fps = o.token_fps;
+  // The 25 Hz frames that get tokens: every 4th, 2nd or each one.
+  const int stride = o.token_fps == 6.25 ? 4 : o.token_fps == 12.5 ? 2 : o.token_fps == 25.0 ? 1 : 0;
+  if (stride == 0) fail("decoder eval: --token-fps must be 6.25, 12.5 or 25, got {}", o.token_fps);
+  const int windows = count_windows((M - 1) / stride + 1, cfg.decoder.frames, o.token_fps, 25.0);
   int total = 0, done = 0;
   for (int s : o.steps) total += int(refs.size()) * windows * s;
 
@@ -83,6 +87,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["noise_correlation"] = d.sample.noise_correlation;
   out["noise_scale"] = d.sample.noise_scale;
   out["start_time"] = d.sample.start_time;
+  out["token_fps"] = o.token_fps;
   std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
   std::vector<double> tok_key_err, tok_all_err, blend_all, blend_all_change, blend_all_err;
   std::vector<double> gt_edges, tok_edges, blend_edges;  // edge_energy over the 25 Hz frames
@@ -110,8 +115,9 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     gt_edges.push_back(edge_energy(gt));
     tok_edges.push_back(edge_energy(tok_dec));
     blend_edges.push_back(edge_energy(blended));
-    auto tokens = clip.tokens.index_select(1, key);  // [1, N, h, w]
-    auto cond = model->cfg.cond_image ? clip.cond.index_select(1, key) : torch::Tensor();
+    auto given = torch::arange(0, M, stride, torch::kLong).to(dev);  // the frames whose tokens the decoder gets
+    auto tokens = clip.tokens.index_select(1, given);                  // [1, (M - 1) / stride + 1, h, w]
+    auto cond = model->cfg.cond_image ? clip.cond.index_select(1, given) : torch::Tensor();
     for (int s : o.steps) {
       d.sample.steps = s;
       auto t0 = std::chrono::steady_clock::now();

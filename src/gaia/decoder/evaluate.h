@@ -37,6 +37,9 @@ struct DecoderEvalOptions {
   int clips = 2;                   // held-out clips
   int token_frames = 8;            // N token frames at 6.25 Hz per clip (-> 4N - 3 frames at 25 Hz)
   std::vector<int> steps{50, 20, 10};  // DDIM step counts to compare (§5.2 uses 50)
+  // Rate of the tokens the video decoder is given: 6.25 Hz (the world model's rate; the decoder upsamples to 25 Hz,
+  // §5.2), 12.5, or 25 (every frame's own tokens, as the tokenizer decoder gets them at 25 Hz).
+  double token_fps = 6.25;
   uint64_t seed = 0;
 };
 
