@@ -78,6 +78,13 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
                      " --clips 1 --token-frames 3 --steps 2,1" + p.tiny() + " --out " + q(p.dir / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
+  // The progress bar is made at the first report, after a window's work: its rate counts from there, not the
+  // whole first window over the microseconds since the bar was made.
+  ASSERT_NE(r.output.find("/s elapsed"), std::string::npos) << r.output;
+  for (size_t at = r.output.find("/s elapsed"); at != std::string::npos; at = r.output.find("/s elapsed", at + 1)) {
+    const size_t from = r.output.rfind(' ', at) + 1;
+    EXPECT_LT(std::stod(r.output.substr(from, at - from)), 1e4) << r.output;
+  }
   auto j = nlohmann::json::parse(read_file(p.dir / "eval" / "eval.json"));
   EXPECT_EQ(j["frames_25hz"].get<int>(), 9);
   ASSERT_EQ(j["clip_starts"].size(), 1u);  // where the scored clip lies: a held-out episode, past its start

@@ -147,7 +147,8 @@ void register_decoder(CLI::App& app) {
       o.seed = uint64_t(run.run.seed);
       std::unique_ptr<ProgressBar> bar;
       auto j = decoder::evaluate_decoder(dc, model, t, *dataset, o, [&](int d, int total) {
-        if (!bar) bar = std::make_unique<ProgressBar>(total, "decoder eval (DDIM steps)");
+        // Made at the first report, which comes after a window's work: rate and ETA count from there.
+        if (!bar) bar = std::make_unique<ProgressBar>(total, "decoder eval (DDIM steps)", true, d);
         bar->update(d);
       });
       if (bar) bar->finish();
@@ -199,7 +200,7 @@ void register_decode(CLI::App& app) {
       std::unique_ptr<ProgressBar> bar;  // the window count is known once the decoder's config is read
       video = decoder::diffusion_decode(t, *weights, ids, cond, *steps, *token_fps, *fps, uint64_t(run.run.seed), dev,
                                         [&](int d, int total) {
-                                          if (!bar) bar = std::make_unique<ProgressBar>(total, "decode");
+                                          if (!bar) bar = std::make_unique<ProgressBar>(total, "decode", true, d);
                                           bar->update(d);
                                         },
                                         [&](Config& dc) { apply_sampling_sets(*flags, "decoder", kDecoderSamplingKeys, *weights, dc); });

@@ -268,7 +268,7 @@ void register_demo(CLI::App& app) {
       std::unique_ptr<ProgressBar> dbar;
       auto v = decoder::diffusion_decode(m.tok, decoder_w, ids, coarse, d->ddim_steps, rate, d->fps,
                                          uint64_t(c.run.seed), dev, [&](int k, int total) {
-                                           if (!dbar) dbar = std::make_unique<ProgressBar>(total, "video decoder");
+                                           if (!dbar) dbar = std::make_unique<ProgressBar>(total, "video decoder", true, k);
                                            dbar->update(k);
                                          });
       if (dbar) dbar->finish();
