@@ -173,8 +173,6 @@ TEST(DecoderCli, BadInputsAreClearErrors) {
   EXPECT_FALSE(fs::exists(p.dir / "x.mp4"));
 }
 
-// Fine-tuning (--init): with a zero learning rate the run keeps the given weights (up to the EMA's rounding); a file
-// that is not a video decoder is one clear error.
 // decoder.train_max_time: every training step's noise level (metrics.jsonl "t") is drawn below it; the default
 // draws from all of [0, 1]; out of range is one error naming the key.
 TEST(DecoderCli, TrainDrawsNoiseLevelsBelowTrainMaxTime) {
@@ -207,6 +205,8 @@ TEST(DecoderCli, TrainDrawsNoiseLevelsBelowTrainMaxTime) {
   EXPECT_FALSE(fs::exists(p.dir / "tbad" / "metrics.jsonl"));
 }
 
+// Fine-tuning (--init): with a zero learning rate the run keeps the given weights (up to the EMA's rounding), and
+// temporal attention layers they lack start as identities; a file that is not a video decoder is one clear error.
 TEST(DecoderCli, InitStartsFromTheGivenWeights) {
   auto& p = DecoderPipeline::get();
   const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --val-every 100";
