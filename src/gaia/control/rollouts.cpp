@@ -159,6 +159,9 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   };
   nlohmann::json windows = nlohmann::json::array();
   std::vector<double> xs, all_copies, all_entropies;
+  // Each rollout's own mean over its windows: the rollouts are independent draws, the windows of one rollout are not,
+  // so the pooled figure's standard error is over these.
+  std::vector<double> rollout_copies(size_t(R), 0.0), rollout_entropies(size_t(R), 0.0);
   eval::Series s_copy{"copy rate (generated)", {}, ""}, s_copy_real{"copy rate (real)", {}, ""};
   eval::Series s_ent{"entropy / 10 bits (generated)", {}, ""}, s_ent_real{"entropy / 10 bits (real)", {}, ""};
   double worst = 0;
@@ -169,6 +172,8 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
       auto w = gen[k].narrow(0, s, W);
       cs.push_back(copy_rate(w));
       es.push_back(unigram_entropy_bits(w, m.info.K));
+      rollout_copies[size_t(k)] += cs.back() / double(F / W);
+      rollout_entropies[size_t(k)] += es.back() / double(F / W);
       window_frames.insert(window_frames.end(), frames[size_t(k)].begin() + s, frames[size_t(k)].begin() + s + W);
     }
     all_copies.insert(all_copies.end(), cs.begin(), cs.end());
@@ -186,19 +191,7 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
     s_ent.y.push_back(e / 10);
     s_ent_real.y.push_back(real_entropy / 10);
   }
-  // Every generated window against every real one: the minute as a whole. The rollouts are independent draws; the
-  // windows of one rollout are not, so the standard error is over the rollouts' own means.
-  std::vector<double> rollout_copies, rollout_entropies;
-  const size_t per = all_copies.size() / size_t(R);
-  for (int64_t k = 0; k < R; ++k) {
-    double c = 0, e = 0;
-    for (size_t i = 0; i < per; ++i) {
-      c += all_copies[i * size_t(R) + size_t(k)] / double(per);
-      e += all_entropies[i * size_t(R) + size_t(k)] / double(per);
-    }
-    rollout_copies.push_back(c);
-    rollout_entropies.push_back(e);
-  }
+  // Every generated window against every real one: the minute as a whole.
   const double pooled_copy = mean_of(all_copies), pooled_entropy = mean_of(all_entropies);
   const double pooled_worst = std::max(std::abs(pooled_copy / real_copy - 1), std::abs(pooled_entropy / real_entropy - 1));
   nlohmann::json j = {{"seconds", o.long_seconds},
