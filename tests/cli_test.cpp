@@ -2,6 +2,8 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "gaia/core/config.h"
+#include "gaia/core/safetensors.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -111,10 +113,58 @@ TEST(Cli, ConvertToHalf) {
   auto src = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
   auto r = test::run_gaia("convert '" + src.string() + "' --out '" + (d / "x.safetensors").string() + "'");
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("--half"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("say --half, --set KEY=VALUE or both"), std::string::npos) << r.output;
   r = test::run_gaia("convert '" + src.string() + "' --half --out '" + (d / "half.safetensors").string() + "'");
   ASSERT_EQ(r.status, 0) << r.output;
   // The output path is used exactly as given (a CLI11 required-flag bug once corrupted it).
   EXPECT_TRUE(fs::exists(d / "half.safetensors")) << r.output;
   EXPECT_LT(fs::file_size(d / "half.safetensors"), fs::file_size(src));
+}
+
+// convert --set changes one sampling setting in the stored config and nothing else: the tensors are the same bytes,
+// the other keys the same values, and keys the file was saved without stay absent. Anything but a sampling key, a
+// bad value or a file without gaia metadata is one error line and no output.
+TEST(Cli, ConvertSetsAStoredSamplingSetting) {
+  test::TempDir d;
+  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  std::string yaml = c.to_yaml();
+  const auto cut = yaml.find("  start_time:");  // as if saved before decoder.start_time existed
+  ASSERT_NE(cut, std::string::npos);
+  yaml.erase(cut, yaml.find('\n', cut) + 1 - cut);
+  SafetensorsWriter w;
+  w.add_f32("w", {2, 3}, {1, 2, 3, 4, 5, 6.5f});
+  w.set_metadata("gaia.component", "world");
+  w.set_metadata("gaia.config", yaml);
+  w.write(d / "world.safetensors");
+  auto r = test::run_gaia("convert " + (d / "world.safetensors").string() +
+                          " --set world.temperature=0.7 --set decoder.noise_scale=0.25 --out " + (d / "t.safetensors").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile f(d / "t.safetensors");
+  EXPECT_EQ(f.metadata().at("gaia.component"), "world");
+  EXPECT_EQ(f.to_float("w"), (std::vector<float>{1, 2, 3, 4, 5, 6.5f}));
+  EXPECT_EQ(f.get("w").dtype, DType::F32);
+  const std::string stored = f.metadata().at("gaia.config");
+  EXPECT_EQ(stored.find("start_time"), std::string::npos) << stored;
+  Config back;
+  back.apply_yaml(stored, "t.safetensors");
+  EXPECT_EQ(back.world.temperature, 0.7);
+  EXPECT_EQ(back.decoder.noise_scale, 0.25);
+  back.world.temperature = c.world.temperature;
+  back.decoder.noise_scale = c.decoder.noise_scale;
+  EXPECT_EQ(back.to_yaml(), c.to_yaml());
+
+  const auto bad = d / "bad.safetensors";
+  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() + " --set world.d_model=64 --out " +
+                                       bad.string()),
+                        "--set world.d_model=64: only sampling settings");
+  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
+                                       " --set world.temperature=0 --out " + bad.string()),
+                        "world.temperature must be > 0");
+  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
+                                       " --set world.top_k=many --out " + bad.string()),
+                        "world.top_k");
+  auto peer = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
+  expect_one_error_line(test::run_gaia("convert " + peer.string() + " --set world.temperature=0.9 --out " + bad.string()),
+                        "no gaia.config metadata");
+  EXPECT_FALSE(fs::exists(bad));
 }

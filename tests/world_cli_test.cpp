@@ -159,10 +159,26 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   r = test::run_gaia("world eval " + q(p.tokens) + w + " --set world.n_layers=3 --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("world.n_layers comes from the weights file"), std::string::npos) << r.output;
-  r = test::run_gaia("generate" + w + " --frames 2 --set world.temperature=0.5 --out " + q(p.dir / "x"));
+  r = test::run_gaia("generate" + w + " --frames 2 --set world.dropout=0.5 --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("here only world.top_k, world.guide_actions_within_top_k can be set"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("here only world.top_k, world.temperature, world.guide_actions_within_top_k can be set"),
+            std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
+  // The temperature stored with the model is generate's default: a file converted to 0.5 samples what --temperature
+  // 0.5 and --set world.temperature=0.5 sample from the original.
+  r = test::run_gaia("convert " + q(p.run / "world.safetensors") + " --set world.temperature=0.5 --out " + q(p.dir / "warm.safetensors"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const std::string roll = " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2 --seed 4";
+  std::vector<torch::Tensor> warm;
+  const std::string orig = " --world " + q(p.run / "world.safetensors");
+  for (const std::string& how : {" --world " + q(p.dir / "warm.safetensors"), orig + " --temperature 0.5",
+                                 orig + " --set world.temperature=0.5"}) {
+    r = test::run_gaia("generate" + how + p.tiny() + roll + " --out " + q(p.dir / "warm"));
+    ASSERT_EQ(r.status, 0) << r.output;
+    warm.push_back(tensor_from_view(SafetensorsFile(p.dir / "warm" / "rollout.safetensors").get("tokens")));
+  }
+  EXPECT_TRUE(torch::equal(warm[0], warm[1]));
+  EXPECT_TRUE(torch::equal(warm[0], warm[2]));
   // ... but its sampling key reaches the sampler: with k = 1 two futures of one prompt are the same.
   r = test::run_gaia("generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2" +
                      " --set world.top_k=1 --seed 3 --out " + q(p.dir / "k1"));

@@ -24,11 +24,6 @@ namespace gaia::app {
 
 namespace {
 
-// What --set may change of a trained decoder: how it samples (the rest is fixed by its weights).
-const std::vector<std::string> kDecoderSamplingKeys{"decoder.ddim_steps", "decoder.mix_probability",
-                                                    "decoder.mix_weight", "decoder.noise_correlation",
-                                                    "decoder.noise_scale", "decoder.start_time"};
-
 // Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
 // dataset episode directory (its tokens.npy) -> int64 [F, N, h, w].
 torch::Tensor read_tokens(const fs::path& p) {

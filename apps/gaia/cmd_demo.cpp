@@ -172,6 +172,7 @@ void register_demo(CLI::App& app) {
     ro.frames = int(F);
     ro.futures = futures;
     ro.sampling.top_k = wc.world.top_k;
+    ro.sampling.temperature = wc.world.temperature;
     ro.sampling.guide_actions_within_top_k = wc.world.guide_actions_within_top_k;
     ro.seed = uint64_t(c.run.seed);
     const int64_t total_frames = 4 * F;

@@ -87,7 +87,7 @@ void register_eval(CLI::App& app) {
       fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
     auto m = control::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
-    apply_sampling_sets(*flags, "world", {"world.top_k", "world.temperature", "world.guide_actions_within_top_k"}, e->world, m.info.config);  // --top-k still wins
+    apply_sampling_sets(*flags, "world", kWorldSamplingKeys, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())
       fail("{}: {} tokens per frame, the world model takes {}", e->tokens, ds.tokens_per_step(), m.info.n());

@@ -25,7 +25,7 @@ struct GenerateFlags {
       action_negative = "mirror";
   std::string sampling, token_schedule = "constant", frame_schedule = "constant";
   int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0, window_stride = 1;
-  double speed = -1, top_p = 0.9, temperature = 1.0, guidance = 0;
+  double speed = -1, top_p = 0.9, temperature = -1, guidance = 0;
 };
 
 // Steering presets (curvature in 1/m, + = left): a gentle bend (~100 m radius) and a sharp one (~30 m).
@@ -63,7 +63,7 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--sampling", g->sampling, "argmax, sample, top-k (default) or top-p");
   cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)");
   cmd->add_option("--top-p", g->top_p, "p for top-p");
-  cmd->add_option("--temperature", g->temperature, "softmax temperature");
+  cmd->add_option("--temperature", g->temperature, "softmax temperature (default: config world.temperature)");
   cmd->add_option("--guidance", g->guidance,
                   "classifier-free guidance scale s (0 = off); guided on actions alone, top-k tokens stay within the "
                   "unguided top k (--set world.guide_actions_within_top_k=false lifts that)");
@@ -82,7 +82,7 @@ void register_generate(CLI::App& app) {
     auto dev = parse_device(run.run.device);
     world::WorldInfo info;
     auto model = world::load_world(g->world, dev, &info);
-    apply_sampling_sets(*flags, "world", {"world.top_k", "world.guide_actions_within_top_k"}, g->world, info.config);  // --top-k still wins
+    apply_sampling_sets(*flags, "world", kWorldSamplingKeys, g->world, info.config);  // --top-k still wins
     const auto& L = model->layout;
     const int64_t F = g->frames;
     if (F < 1) fail("--frames must be >= 1");
@@ -168,7 +168,7 @@ void register_generate(CLI::App& app) {
     o.sampling.strategy = world::parse_strategy(g->sampling.empty() ? "top-k" : g->sampling);
     o.sampling.top_k = g->top_k > 0 ? g->top_k : info.config.world.top_k;
     o.sampling.top_p = g->top_p;
-    o.sampling.temperature = g->temperature;
+    o.sampling.temperature = g->temperature > 0 ? g->temperature : info.config.world.temperature;
     o.sampling.guide_actions_within_top_k = info.config.world.guide_actions_within_top_k;
     o.guidance.scale = g->guidance;
     o.guidance.tokens = world::parse_token_schedule(g->token_schedule);

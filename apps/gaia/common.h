@@ -30,6 +30,11 @@ Config resolve_config(const SharedFlags& f);
 void apply_sampling_sets(const SharedFlags& f, const std::string& section, const std::vector<std::string>& sampling_keys,
                          const std::string& weights, Config& model_cfg);
 
+// The keys that say how a model is sampled rather than what it is: a weights file stores them with its config, a run
+// may override them (apply_sampling_sets), and `gaia convert --set` changes the file's own.
+extern const std::vector<std::string> kWorldSamplingKeys;    // world.top_k, world.temperature, ...
+extern const std::vector<std::string> kDecoderSamplingKeys;  // decoder.ddim_steps, decoder.start_time, ...
+
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
 
@@ -52,7 +57,7 @@ void register_generate(CLI::App& app);
 void register_decoder(CLI::App& app);   // gaia decoder train|eval
 void register_decode(CLI::App& app);    // gaia decode
 void register_probe(CLI::App& app);     // gaia probe train|eval
-void register_convert(CLI::App& app);   // gaia convert --half
+void register_convert(CLI::App& app);   // gaia convert --half / --set
 void register_eval(CLI::App& app);      // gaia eval (action / text control, futures, long rollouts)
 void register_train_all(CLI::App& app); // gaia train-all (the whole recipe)
 void register_report(CLI::App& app);    // gaia report RUN_DIR

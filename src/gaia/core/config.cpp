@@ -242,6 +242,7 @@ void Config::validate() const {
   double p = world.p_uncond + world.p_action + world.p_text;
   need(p > 0.999 && p < 1.001, "world.p_uncond + p_action + p_text must be 1");
   need(world.top_k >= 1, "world.top_k must be >= 1");
+  need(world.temperature > 0, "world.temperature must be > 0");
   need(data.balance_exponent >= 0 && data.balance_exponent <= 1, "data.balance_exponent must be in [0, 1]");
   need(data.native_fps > 0 && data.world_fps > 0 && data.world_fps <= data.native_fps,
        "data.world_fps must be in (0, data.native_fps]");
@@ -276,6 +277,25 @@ std::string Config::to_yaml() {
     out += "  " + f.key.substr(dot + 1) + ": " + f.get() + "\n";
   }
   return out;
+}
+
+std::string set_yaml_key(const std::string& text, const std::string& kv, const std::string& where) {
+  Config c;
+  c.apply_yaml(text, where);
+  c.set(kv);
+  c.validate();
+  const std::string key = kv.substr(0, kv.find('='));
+  std::string value;
+  for (auto& f : c.fields())
+    if (f.key == key) value = f.get();  // the value as the config writes it ("0.9", "[0, 1, 2]")
+  YAML::Node root = YAML::Load(text);
+  if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
+  const auto dot = key.find('.');
+  if (dot == std::string::npos)
+    root[key] = YAML::Load(value);
+  else
+    root[key.substr(0, dot)][key.substr(dot + 1)] = YAML::Load(value);
+  return YAML::Dump(root) + "\n";
 }
 
 }  // namespace gaia

@@ -172,4 +172,9 @@ struct Config {
   std::string to_yaml();
 };
 
+// A stored config's YAML `text` (e.g. a weights file's metadata) with one key set: "world.temperature=0.9", checked
+// as --set checks it and the whole config validated. Only that key changes; keys the text lacks stay absent, so a
+// loader still sees which keys the file was saved without (decoder/io.cpp gives those their legacy values).
+std::string set_yaml_key(const std::string& text, const std::string& key_eq_value, const std::string& where);
+
 }  // namespace gaia

@@ -145,15 +145,17 @@ std::string SafetensorsWriter::serialize() const {
 
 void SafetensorsWriter::write(const fs::path& path) const { write_file_atomic(path, serialize()); }
 
-double convert_to_half(const fs::path& in, const fs::path& out) {
+double rewrite_weights(const fs::path& in, const fs::path& out, bool half,
+                       const std::map<std::string, std::string>& metadata) {
   SafetensorsWriter w;
   double max_err = 0;
   {
     SafetensorsFile f(in);
     for (const auto& [k, v] : f.metadata()) w.set_metadata(k, v);
+    for (const auto& [k, v] : metadata) w.set_metadata(k, v);
     for (const auto& name : f.names()) {
       const auto& t = f.get(name);
-      if (t.dtype != DType::F32) {
+      if (!half || t.dtype != DType::F32) {
         w.add(name, t.dtype, t.shape, t.data, t.nbytes);
         continue;
       }

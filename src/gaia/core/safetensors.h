@@ -53,9 +53,12 @@ class SafetensorsWriter {
   std::map<std::string, std::string> metadata_;
 };
 
-// Re-writes a weights file with every F32 tensor stored as F16 (other dtypes and the metadata unchanged), for
-// shipping models at half the size; gaia's loaders convert back to float32. Returns the largest absolute rounding
-// error, so the caller can say what was lost. Written atomically; `in` and `out` may be the same path.
-double convert_to_half(const fs::path& in, const fs::path& out);
+// Re-writes a weights file: with `half`, every F32 tensor stored as F16 (other dtypes unchanged), for shipping models
+// at half the size (gaia's loaders convert back to float32); the metadata entries in `metadata` replace or join the
+// file's own. Returns the largest absolute rounding error (0 without `half`), so the caller can say what was lost.
+// Written atomically; `in` and `out` may be the same path.
+double rewrite_weights(const fs::path& in, const fs::path& out, bool half,
+                       const std::map<std::string, std::string>& metadata = {});
+inline double convert_to_half(const fs::path& in, const fs::path& out) { return rewrite_weights(in, out, true); }
 
 }  // namespace gaia
