@@ -252,6 +252,44 @@ TEST(WorldCli, FineTuneStartsFromInitWeightsAndKeepsTheirVocabulary) {
   EXPECT_NE(r.output.find("missing.safetensors"), std::string::npos) << r.output;
 }
 
+// gaia world calibrate: the fitted world.copy_bias is stored with the model, lowers the cross-entropy of the
+// training windows it was fitted on, and a second calibration of the result finds the same value (the fit starts
+// from the model's own bias). Bad flags are one error line with nothing written.
+TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
+  auto& p = Pipeline::get();
+  if (!fs::exists(p.run / "world.safetensors")) {
+    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  auto parse = [](const std::string& out, const std::string& after) {
+    auto at = out.find(after);
+    EXPECT_NE(at, std::string::npos) << out;
+    return at == std::string::npos ? NAN : std::stod(out.substr(at + after.size()));
+  };
+  auto r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                          " --max-windows 16 --out " + q(p.dir / "cal.safetensors"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const double bias = parse(r.output, "world.copy_bias ");
+  const auto ce = r.output.substr(r.output.find("cross-entropy "));  // "cross-entropy A -> B nats"
+  const double before = parse(ce, "cross-entropy "), after = parse(ce, "-> ");
+  EXPECT_LT(after, before) << r.output;  // the bias is fitted on these windows: it can only lower their loss
+  world::WorldInfo info;
+  world::load_world(p.dir / "cal.safetensors", torch::kCPU, &info);
+  EXPECT_NEAR(info.config.world.copy_bias, bias, 1e-4);
+  EXPECT_NE(bias, 0.0);
+  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.dir / "cal.safetensors") + p.tiny() +
+                     " --max-windows 16 --out " + q(p.dir / "cal2.safetensors"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NEAR(parse(r.output, "world.copy_bias "), bias, 1e-3) << r.output;
+  EXPECT_NEAR(parse(r.output, "(was "), bias, 1e-4) << r.output;
+
+  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                     " --max-windows 0 --out " + q(p.dir / "bad.safetensors"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--max-windows must be >= 1"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad.safetensors"));
+}
+
 // gaia eval end to end on the tiny pipeline (shipped probes: they are fully convolutional, any frame size works):
 // every part runs, the numbers are where they must be, and the report is written.
 TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {

@@ -6,6 +6,7 @@
 
 #include "gaia/core/config.h"
 #include "gaia/plan/plan.h"
+#include "gaia/world/calibrate.h"
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
 #include "gaia/world/rollout.h"
@@ -225,7 +226,9 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
   p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+  for (double bias : {0.0, 1.5})
   for (int stride : {1, 2, int(T) - 1}) {
+  m->cfg.copy_bias = bias;  // the rollout adds world.copy_bias exactly where forward() does
   RolloutOptions o;
   o.frames = int(F);
   o.sampling.strategy = Strategy::Argmax;
@@ -243,9 +246,10 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
     b.actions = p.actions.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     b.text_ids = p.text_ids.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     auto want = m->forward(b).select(1, k - k0).argmax(-1);  // [1, n]
-    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k << ", stride " << stride;
+    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k << ", stride " << stride << ", bias " << bias;
   }
   }
+  m->cfg.copy_bias = 0;
   RolloutOptions bad;
   bad.window_stride = int(T);
   EXPECT_NE(test::error_of([&] { rollout(m, p, bad); }).find("window stride"), std::string::npos);
@@ -457,4 +461,53 @@ TEST(WorldModel, ActivationCheckpointingGivesTheSameGradients) {
   for (size_t i = 0; i < g0.size(); ++i) worst = std::max(worst, (g0[i] - g1[i]).abs().max().item<double>());
   EXPECT_LT(worst, 1e-5);
   EXPECT_GT(g1[0].abs().sum().item<double>(), 0);
+}
+
+// world.copy_bias adds exactly b to the logit of the code each position held one frame earlier, and nothing else;
+// the first frame of the window has no earlier frame in view. A large bias makes a sampled rollout repeat the prompt.
+TEST(WorldModel, CopyBiasRaisesOnlyThePreviousFramesCode) {
+  Config c = tiny();
+  auto m = small_model(c, 2);
+  torch::NoGradGuard ng;
+  auto b = random_batch(c, 2, 3);
+  auto base = m->forward(b);
+  m->cfg.copy_bias = 0.75;
+  auto biased = m->forward(b);
+  auto want = torch::zeros_like(base);
+  for (int64_t x = 0; x < 2; ++x)
+    for (int64_t t = 1; t < 3; ++t)
+      for (int64_t i = 0; i < kN; ++i) want[x][t][i][b.tokens[x][t - 1][i].item<int64_t>()] = 0.75;
+  EXPECT_TRUE(torch::allclose(biased - base, want, 0, 1e-5));
+
+  m->cfg.copy_bias = 100;
+  RolloutPrompt p;
+  p.tokens = torch::randint(0, kK, {2, kN}, torch::kLong);
+  RolloutOptions o;
+  o.frames = 3;
+  o.futures = 2;
+  o.seed = 7;
+  auto r = rollout(m, p, o);  // top-k sampling
+  for (int64_t k = 2; k < 5; ++k) EXPECT_TRUE(torch::equal(r.tokens[0][k], p.tokens[1])) << k;
+  m->cfg.copy_bias = 0;
+  auto free = rollout(m, p, o);
+  EXPECT_FALSE(torch::equal(free.tokens[0][2], p.tokens[1]));
+}
+
+// The fit: with outcomes drawn from p0 raised by a known bias, the maximum-likelihood bias is found again, and at the
+// optimum the expected number of copies equals the observed one. Degenerate outcomes are an error.
+TEST(WorldCalibration, FitRecoversAKnownCopyBias) {
+  torch::manual_seed(3);
+  const int64_t N = 200000;
+  auto p0 = torch::rand({N}, torch::kDouble) * 0.45 + 0.05;
+  const double b = 0.7;
+  auto pb = p0 * std::exp(b) / (1 - p0 + p0 * std::exp(b));
+  auto y = (torch::rand({N}, torch::kDouble) < pb).to(torch::kDouble);
+  const double fit = fit_copy_bias(p0.log(), y);
+  EXPECT_NEAR(fit, b, 0.03);
+  auto pf = p0 * std::exp(fit) / (1 - p0 + p0 * std::exp(fit));
+  EXPECT_NEAR(pf.sum().item<double>(), y.sum().item<double>(), 1e-3);
+  EXPECT_NEAR(fit_copy_bias(p0.log(), (torch::rand({N}, torch::kDouble) < p0).to(torch::kDouble)), 0.0, 0.03);
+  EXPECT_NE(test::error_of([&] { fit_copy_bias(p0.log(), torch::zeros({N})); }).find("no finite optimum"),
+            std::string::npos);
+  EXPECT_NE(test::error_of([&] { fit_copy_bias(p0.log(), torch::zeros({3})); }).find("as many"), std::string::npos);
 }

@@ -1,4 +1,4 @@
-// gaia world train|eval: the world model of §2.3 on a token dataset (gaia tokenize, or a bare tokens .npy).
+// gaia world train|eval|calibrate: the world model of §2.3 on a token dataset (gaia tokenize, or a bare tokens .npy).
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
@@ -9,6 +9,7 @@
 #include "gaia/eval/compress.h"
 #include "gaia/eval/svg_plot.h"
 #include "gaia/torch/tensor_io.h"
+#include "gaia/world/calibrate.h"
 #include "gaia/world/evaluate.h"
 #include "gaia/world/io.h"
 #include "gaia/world/trainer.h"
@@ -16,7 +17,7 @@
 namespace gaia::app {
 
 void register_world(CLI::App& app) {
-  auto* world = app.add_subcommand("world", "world model (§2.3): train, eval");
+  auto* world = app.add_subcommand("world", "world model (§2.3): train, eval, calibrate");
   world->require_subcommand(1);
 
   {
@@ -186,6 +187,50 @@ void register_world(CLI::App& app) {
                           eval::svg_lines("Perplexity of the generated frame's tokens by position (Fig. 5)", xs, lines,
                                           "token position", "perplexity"));
       }
+    });
+  }
+
+  {
+    auto* cmd = world->add_subcommand(
+        "calibrate", "fit world.copy_bias (how likely a patch is to keep its code from one frame to the next) by maximum "
+                     "likelihood on training windows, and write the model with it");
+    auto flags = std::make_shared<SharedFlags>();
+    auto tokens = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
+    auto max_windows = std::make_shared<size_t>(256);
+    cmd->add_option("TOKENS", *tokens, "token dataset (its training episodes are used; all episodes if none is held out)")
+        ->required();
+    cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
+    cmd->add_option("--max-windows", *max_windows, "training windows of T steps, evenly spaced");
+    add_shared_flags(cmd, flags.get(), "output weights file (may be --world itself)");
+    cmd->callback([=] {
+      Config run = resolve_config(*flags);
+      apply_threads(run);
+      if (flags->out.empty()) fail("gaia world calibrate: --out FILE is required");
+      if (*max_windows < 1) fail("--max-windows must be >= 1");
+      auto dev = parse_device(run.run.device);
+      world::WorldInfo info;
+      auto model = world::load_world(*weights, dev, &info);
+      apply_sampling_sets(*flags, "world", {}, *weights, info.config);
+      world::TokenDataset ds(*tokens, info.K);
+      if (ds.tokens_per_step() != info.n())
+        fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
+      auto ids = ds.split(0.1, info.config.run.seed).train;
+      if (ids.empty()) ids = ds.ids();
+      auto windows = world::validation_windows(ds, ds.indices(ids), info.config.world.context_steps, *max_windows);
+      if (windows.empty()) fail("{}: no training window of {} steps", *tokens, info.config.world.context_steps);
+      const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
+      ProgressBar bar(int64_t(windows.size()), "calibrate");
+      auto c = world::calibrate_copy_bias(model, ds, windows, vocab, world::ConditioningMix::from(info.config.world),
+                                          info.config.world.batch_size, [&](int64_t d, int64_t) { bar.update(d); });
+      bar.finish();
+      const double was = info.config.world.copy_bias;
+      info.config.world.copy_bias = c.bias;
+      model->cfg.copy_bias = c.bias;
+      world::save_world(model, info, flags->out);
+      std::printf("%s: world.copy_bias %.4f (was %.4f) from %zu windows, %lld tokens: real copy rate %.4f, the model "
+                  "gave it %.4f -> %.4f; cross-entropy %.4f -> %.4f nats\n",
+                  flags->out.c_str(), c.bias, was, windows.size(), (long long)c.tokens, c.copy_rate,
+                  c.predicted_before, c.predicted_after, c.nats_before, c.nats_after);
     });
   }
 }

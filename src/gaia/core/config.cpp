@@ -127,6 +127,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("world.activation_checkpointing", &w.activation_checkpointing));
   f.push_back(field("world.top_k", &w.top_k));
   f.push_back(field("world.temperature", &w.temperature));
+  f.push_back(field("world.copy_bias", &w.copy_bias));
   f.push_back(field("world.guide_actions_within_top_k", &w.guide_actions_within_top_k));
   f.push_back(field("world.guidance_scale", &w.guidance_scale));
   auto& v = decoder;

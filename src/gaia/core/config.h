@@ -79,6 +79,11 @@ struct WorldConfig {
   bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
   int top_k = 50;                // paper §5.1 Fig. 5: top-k = 50
   double temperature = 1.0;
+  // Logit added to the previous frame's token at the same position (t >= 1), in training, scoring and sampling. 0 =
+  // the paper's model. `gaia world calibrate` fits it after training by maximum likelihood on training windows: a
+  // small model under-predicts "this patch did not change" (it copies less than real video), and one scalar fitted
+  // like temperature scaling (Guo et al. 2017) puts that probability where the data has it.
+  double copy_bias = 0.0;
   bool guide_actions_within_top_k = true;  // action-guided tokens come from the conditional top k (world/sampling.h)
   double guidance_scale = 0.0;   // s in l = (1 + s) l_cond - s l_uncond (paper eq. 2)
 };

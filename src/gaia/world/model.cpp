@@ -118,7 +118,12 @@ torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
   for (int64_t t = 0; t < T; ++t)
     for (int64_t i = 0; i < n; ++i) idx.push_back(layout.predictor(t, i));
   auto sel = torch::tensor(idx, torch::TensorOptions().dtype(torch::kLong)).to(h.device());
-  return logits(h.index_select(1, sel)).view({B, T, n, K});
+  auto out = logits(h.index_select(1, sel)).view({B, T, n, K});
+  if (cfg.copy_bias == 0 || T < 2) return out;
+  // world.copy_bias on the code each position held one step earlier (frame 0 of a window has none in view).
+  auto bonus = torch::zeros({B, T, n, K}, out.options());
+  bonus.slice(1, 1).scatter_(-1, b.tokens.slice(1, 0, T - 1).to(torch::kLong).unsqueeze(-1), cfg.copy_bias);
+  return out + bonus;
 }
 
 KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity) const {

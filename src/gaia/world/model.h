@@ -21,7 +21,8 @@ struct WorldModelImpl : torch::nn::Module {
   // n image tokens per frame and K codes come from the tokenizer; the rest from the config.
   WorldModelImpl(const WorldConfig& c, int64_t n, int64_t K);
 
-  // Training / scoring: logits of every image token [B, T, n, K], each predicted from everything before it.
+  // Training / scoring: logits of every image token [B, T, n, K], each predicted from everything before it
+  // (plus cfg.copy_bias on the previous frame's code at the same position).
   torch::Tensor forward(const WorldBatch& b);
 
   // ---- pieces for incremental sampling (world/rollout) ----

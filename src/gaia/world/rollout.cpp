@@ -158,6 +158,9 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
     auto last = h.select(1, h.size(1) - 1);  // [B, d]
     for (int64_t i = 0; i < n; ++i) {
       auto lg = model->logits(last);  // [B, K]
+      if (k > 0 && model->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
+        lg.scatter_add_(1, all.select(1, k - 1).select(1, i).view({B, 1}),
+                        torch::full({B, 1}, model->cfg.copy_bias, lg.options()));
       torch::Tensor tok;
       if (guided) {
         auto c = lg.narrow(0, 0, N);
