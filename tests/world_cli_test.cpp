@@ -283,6 +283,11 @@ TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
   EXPECT_NEAR(parse(r.output, "world.copy_bias "), bias, 1e-3) << r.output;
   EXPECT_NEAR(parse(r.output, "(was "), bias, 1e-4) << r.output;
 
+  // --without-meta leaves out the episodes with that key: every synth drive has a synth_index.
+  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+                     " --without-meta synth_index --out " + q(p.dir / "bad.safetensors"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("in the episodes without synth_index"), std::string::npos) << r.output;
   r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
                      " --max-windows 0 --out " + q(p.dir / "bad.safetensors"));
   EXPECT_NE(r.status, 0);

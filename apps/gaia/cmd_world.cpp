@@ -201,6 +201,10 @@ void register_world(CLI::App& app) {
         ->required();
     cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
     cmd->add_option("--max-windows", *max_windows, "training windows of T steps, evenly spaced");
+    auto without = std::make_shared<std::vector<std::string>>();
+    cmd->add_option("--without-meta", *without,
+                    "leave out episodes whose metadata has this key: calibrate on the kind of driving you will roll "
+                    "out, e.g. synth_wander keeps gaia synth's lane-keeping drives (repeatable)");
     add_shared_flags(cmd, flags.get(), "output weights file (may be --world itself)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);
@@ -216,8 +220,16 @@ void register_world(CLI::App& app) {
         fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
       auto ids = ds.split(0.1, info.config.run.seed).train;
       if (ids.empty()) ids = ds.ids();
-      auto windows = world::validation_windows(ds, ds.indices(ids), info.config.world.context_steps, *max_windows);
-      if (windows.empty()) fail("{}: no training window of {} steps", *tokens, info.config.world.context_steps);
+      std::vector<size_t> eps;
+      for (size_t e : ds.indices(ids)) {
+        bool keep = true;
+        for (const auto& key : *without) keep = keep && !ds.meta(e).extra.count(key);
+        if (keep) eps.push_back(e);
+      }
+      auto windows = world::validation_windows(ds, eps, info.config.world.context_steps, *max_windows);
+      if (windows.empty())
+        fail("{}: no training window of {} steps{}", *tokens, info.config.world.context_steps,
+             without->empty() ? "" : " in the episodes without " + fmt::format("{}", fmt::join(*without, ", ")));
       const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
       ProgressBar bar(int64_t(windows.size()), "calibrate");
       auto c = world::calibrate_copy_bias(model, ds, windows, vocab, world::ConditioningMix::from(info.config.world),
@@ -226,6 +238,7 @@ void register_world(CLI::App& app) {
       const double was = info.config.world.copy_bias;
       info.config.world.copy_bias = c.bias;
       model->cfg.copy_bias = c.bias;
+      if (fs::path(flags->out).has_parent_path()) fs::create_directories(fs::path(flags->out).parent_path());
       world::save_world(model, info, flags->out);
       std::printf("%s: world.copy_bias %.4f (was %.4f) from %zu windows, %lld tokens: real copy rate %.4f, the model "
                   "gave it %.4f -> %.4f; cross-entropy %.4f -> %.4f nats\n",
