@@ -2,7 +2,10 @@
 // the fp16 copies land in --ship, and a second run finds every stage done and skips it (resumable recipe).
 #include <nlohmann/json.hpp>
 
+#include <torch/torch.h>
+
 #include "gaia/core/safetensors.h"
+#include "gaia/world/io.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -34,7 +37,7 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
     EXPECT_EQ(f32, 0) << f;
   }
   auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
-  ASSERT_EQ(log.size(), 11u + 5u);  // 11 training stages + 5 ship copies
+  ASSERT_EQ(log.size(), 12u + 5u);  // 12 training stages + 5 ship copies
   EXPECT_NE(log[5]["command"].get<std::string>().find("--decoder-only"), std::string::npos);  // tokenizer-refine
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.token_blocks=2"), std::string::npos);
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.ema_decay=0.999"), std::string::npos);
@@ -48,6 +51,12 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   EXPECT_EQ(mirrored, 6);
   EXPECT_NE(log[7]["command"].get<std::string>().find("world train"), std::string::npos);
   EXPECT_NE(log[7]["command"].get<std::string>().find("--steps 4"), std::string::npos);
+  // The shipped world model is the calibrated one, fitted on the lane-keeping drives.
+  EXPECT_NE(log[8]["command"].get<std::string>().find("world calibrate"), std::string::npos);
+  EXPECT_NE(log[8]["command"].get<std::string>().find("--without-meta synth_wander"), std::string::npos);
+  world::WorldInfo shipped;
+  world::load_world(d / "models" / "world.safetensors", torch::kCPU, &shipped);
+  EXPECT_NE(shipped.config.world.copy_bias, 0.0);
   // The procedural data: 3 lane-keeping episodes, 2 more whose driver wanders and 1 whose driver also swerves
   // (docs/synth.md).
   int keep = 0, wander = 0, swerve = 0;
@@ -61,7 +70,7 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   // Again: nothing left to do.
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 16) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 17) << r.output;
   // A bad config key fails before any stage starts, naming the key.
   r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);

@@ -82,7 +82,8 @@ void register_train_all(CLI::App& app) {
     };
     const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
     const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
-    const std::string tokens = (out / "tokens").string(), world = (out / "world" / "world.safetensors").string();
+    const std::string tokens = (out / "tokens").string(), trained = (out / "world" / "world.safetensors").string();
+    const std::string world = (out / "world-calibrated" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
     // A tokenizer run from earlier weights without the GAN term (AdamW 2e-4, 100 warm-up steps, cosine to 1e-5).
@@ -106,7 +107,11 @@ void register_train_all(CLI::App& app) {
         // ones, and the shipped model's steering reaches its targets with them (MODEL_CARD.md, "World model").
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
-         world},
+         trained},
+        // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
+        // then copy like real video (MODEL_CARD.md, "Copy calibration").
+        {"world-calibrate",
+         with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--out", world}), world},
         {"decoder",
          with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
                (out / "decoder").string()}),
