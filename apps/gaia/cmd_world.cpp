@@ -16,6 +16,23 @@
 
 namespace gaia::app {
 
+namespace {
+
+// --world's model on the run's device, with its own config: its keys cannot be --set here (the weights fix them).
+world::WorldModel load_world_for(const SharedFlags& flags, const Config& run, const std::string& weights,
+                                 world::WorldInfo* info) {
+  auto model = world::load_world(weights, parse_device(run.run.device), info);
+  apply_sampling_sets(flags, "world", {}, weights, info->config);
+  return model;
+}
+
+void check_tokens(const world::TokenDataset& ds, const world::WorldInfo& info, const std::string& tokens) {
+  if (ds.tokens_per_step() != info.n())
+    fail("{}: {} tokens per frame, the world model was trained on {}", tokens, ds.tokens_per_step(), info.n());
+}
+
+}  // namespace
+
 void register_world(CLI::App& app) {
   auto* world = app.add_subcommand("world", "world model (§2.3): train, eval, calibrate");
   world->require_subcommand(1);
@@ -76,13 +93,10 @@ void register_world(CLI::App& app) {
     cmd->callback([=] {
       Config run = resolve_config(*flags);
       apply_threads(run);
-      auto dev = parse_device(run.run.device);
       world::WorldInfo info;
-      auto model = world::load_world(*weights, dev, &info);
-      apply_sampling_sets(*flags, "world", {}, *weights, info.config);
+      auto model = load_world_for(*flags, run, *weights, &info);
       world::TokenDataset ds(*tokens, info.K);
-      if (ds.tokens_per_step() != info.n())
-        fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
+      check_tokens(ds, info, *tokens);
       auto split = ds.split(0.1, info.config.run.seed);
       auto ids = split.held_out();
       if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
@@ -211,13 +225,10 @@ void register_world(CLI::App& app) {
       apply_threads(run);
       if (flags->out.empty()) fail("gaia world calibrate: --out FILE is required");
       if (*max_windows < 1) fail("--max-windows must be >= 1");
-      auto dev = parse_device(run.run.device);
       world::WorldInfo info;
-      auto model = world::load_world(*weights, dev, &info);
-      apply_sampling_sets(*flags, "world", {}, *weights, info.config);
+      auto model = load_world_for(*flags, run, *weights, &info);
       world::TokenDataset ds(*tokens, info.K);
-      if (ds.tokens_per_step() != info.n())
-        fail("{}: {} tokens per frame, the world model was trained on {}", *tokens, ds.tokens_per_step(), info.n());
+      check_tokens(ds, info, *tokens);
       auto ids = ds.split(0.1, info.config.run.seed).train;
       if (ids.empty()) ids = ds.ids();
       std::vector<size_t> eps;
