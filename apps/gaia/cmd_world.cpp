@@ -46,7 +46,9 @@ void register_world(CLI::App& app) {
     cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
-    cmd->add_option("--init", o->init, "start from these world model weights (fine-tuning; ignored when resuming)");
+    cmd->add_option("--init", o->init,
+                    "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
+                    "not carried over: run gaia world calibrate again afterwards)");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
