@@ -1,9 +1,9 @@
 #include "gaia/world/calibrate.h"
 
 #include <cmath>
-#include <random>
 
 #include "gaia/core/error.h"
+#include "gaia/world/evaluate.h"
 
 namespace gaia::world {
 
@@ -41,9 +41,7 @@ CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, c
   const double b0 = model->cfg.copy_bias;
   std::vector<torch::Tensor> logp_copy, logp_true, copied;
   for (size_t w0 = 0; w0 < windows.size(); w0 += size_t(batch)) {
-    std::vector<Window> ws(windows.begin() + long(w0), windows.begin() + long(std::min(windows.size(), w0 + size_t(batch))));
-    std::mt19937_64 rng(w0);  // fixed conditioning per window: the same fit every time
-    WorldBatch b = ds.make_batch(ws, vocab, model->layout.m, mix, rng).to(dev);
+    WorldBatch b = batch_at(ds, windows, w0, batch, vocab, model->layout.m, mix).to(dev);  // the same fit every time
     auto lp = torch::log_softmax(model->forward(b).slice(1, 1).to(torch::kFloat), -1);  // [B, T-1, n, K]
     auto tok = b.tokens.to(torch::kLong);
     auto prev = tok.slice(1, 0, -1).unsqueeze(-1), cur = tok.slice(1, 1).unsqueeze(-1);
@@ -61,14 +59,13 @@ CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, c
   c.tokens = y.numel();
   c.copy_rate = y.mean().item<double>();
   c.predicted_before = a.exp().mean().item<double>();
-  auto a1 = log_p_with_bias(a0, c.bias);
-  c.predicted_after = a1.exp().mean().item<double>();
-  // A non-copied token's probability scales by the same normaliser: log p_b(x) = log p(x) - log Z_b, with
-  // log Z_b = log(1 - p(copy) + p(copy) e^(b - b_now)); a copied one is log p_b(copy).
-  auto logZ = torch::logaddexp(torch::log1p(-a.exp().clamp_max(1 - 1e-12)), a + (c.bias - b0));
-  auto after = torch::where(y > 0, a1, t - logZ);
+  // Moving the bias by d renormalises every code by Z = 1 - p(copy) + p(copy) e^d and raises the copied code by d:
+  // log p'(x) = log p(x) + d [x = copy] - log Z.
+  const double d = c.bias - b0;
+  auto logZ = torch::logaddexp(torch::log1p(-a.exp().clamp_max(1 - 1e-12)), a + d);
+  c.predicted_after = (a + d - logZ).exp().mean().item<double>();
   c.nats_before = -t.mean().item<double>();
-  c.nats_after = -after.mean().item<double>();
+  c.nats_after = -(t + d * y - logZ).mean().item<double>();
   return c;
 }
 

@@ -25,16 +25,14 @@ torch::Tensor token_nll(const torch::Tensor& logits, const torch::Tensor& tokens
   return -torch::log_softmax(logits.to(torch::kFloat), -1).gather(-1, tokens.unsqueeze(-1)).squeeze(-1);
 }
 
-// Windows [b0, b0 + batch) of `windows` -> their batch, with the conditioning mode drawn from rng(b0) (fixed, so a
-// window scores the same in every call).
+}  // namespace
+
 WorldBatch batch_at(const TokenDataset& ds, const std::vector<Window>& windows, size_t b0, int64_t batch,
                     const text::Vocab* vocab, int64_t m, const ConditioningMix& mix) {
   std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
   std::mt19937_64 rng(b0);
   return ds.make_batch(ws, vocab, m, mix, rng);
 }
-
-}  // namespace
 
 Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
             const ScoreOptions& o) {

@@ -12,6 +12,11 @@
 
 namespace gaia::world {
 
+// Windows [b0, b0 + batch) of `windows` -> their batch, with the conditioning mode drawn from rng(b0) (fixed, so a
+// window is conditioned the same way in every call).
+WorldBatch batch_at(const TokenDataset& ds, const std::vector<Window>& windows, size_t b0, int64_t batch,
+                    const text::Vocab* vocab, int64_t m, const ConditioningMix& mix);
+
 struct ScoreOptions {
   Conditioning mode = Conditioning::kAction;
   bool shuffle = false;    // conditioning of window i taken from window perm(i), a fixed derangement

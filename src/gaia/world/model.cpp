@@ -120,10 +120,14 @@ torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
   auto sel = torch::tensor(idx, torch::TensorOptions().dtype(torch::kLong)).to(h.device());
   auto out = logits(h.index_select(1, sel)).view({B, T, n, K});
   if (cfg.copy_bias == 0 || T < 2) return out;
-  // world.copy_bias on the code each position held one step earlier (frame 0 of a window has none in view).
-  auto bonus = torch::zeros({B, T, n, K}, out.options());
-  bonus.slice(1, 1).scatter_(-1, b.tokens.slice(1, 0, T - 1).to(torch::kLong).unsqueeze(-1), cfg.copy_bias);
-  return out + bonus;
+  // Frame 0 of a window has no earlier frame in view.
+  auto prev = b.tokens.slice(1, 0, T - 1).to(out.device(), torch::kLong);
+  return torch::cat({out.narrow(1, 0, 1), with_copy_bias(out.slice(1, 1), prev, cfg.copy_bias)}, 1);
+}
+
+torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias) {
+  auto idx = prev.to(torch::kLong).unsqueeze(-1);
+  return logits.scatter_add(-1, idx, torch::full(idx.sizes(), bias, logits.options()));
 }
 
 KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity) const {

@@ -55,6 +55,9 @@ struct WorldModelImpl : torch::nn::Module {
 };
 TORCH_MODULE(WorldModel);
 
+// world.copy_bias: logits [..., K] with `bias` added at the code each position held one frame earlier, prev [...].
+torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias);
+
 // Mean cross-entropy over image tokens (paper eq. 1); logits [B, T, n, K], tokens [B, T, n].
 torch::Tensor image_token_loss(const torch::Tensor& logits, const torch::Tensor& tokens);
 

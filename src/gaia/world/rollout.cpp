@@ -159,8 +159,7 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
     for (int64_t i = 0; i < n; ++i) {
       auto lg = model->logits(last);  // [B, K]
       if (k > 0 && model->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
-        lg.scatter_add_(1, all.select(1, k - 1).select(1, i).view({B, 1}),
-                        torch::full({B, 1}, model->cfg.copy_bias, lg.options()));
+        lg = with_copy_bias(lg, all.select(1, k - 1).select(1, i), model->cfg.copy_bias);
       torch::Tensor tok;
       if (guided) {
         auto c = lg.narrow(0, 0, N);
