@@ -412,7 +412,24 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_FALSE(cold["guide_actions_within_top_k"].get<bool>());
   EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
 
+  // The steering response curve: the sweep's commands replace the default ones, each with its own read-back.
+  r = test::run_gaia(base + " --only action --commands sweep --prompts 1 --prompt-frames 2 --frames " + std::to_string(K - 1) +
+                     " --out " + q(p.dir / "eval-sweep"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto sw = nlohmann::json::parse(read_file(p.dir / "eval-sweep" / "eval.json"))["action_control"];
+  EXPECT_EQ(sw["commands"], "sweep");
+  EXPECT_EQ(sw["rollouts"].get<int>(), 8);
+  for (const char* c : {"right-40", "right-30", "right-20", "right-14", "right-8", "left-8", "left-20", "left-30"})
+    ASSERT_TRUE(sw["per_command"].contains(c)) << c << " " << sw["per_command"].dump();
+  EXPECT_NEAR(sw["per_command"]["right-14"]["commanded_curvature"].get<double>(), -0.014, 1e-12);
+  EXPECT_TRUE(sw["per_command"]["right-20"]["out_of_distribution"].get<bool>());
+  EXPECT_FALSE(sw["per_command"]["left-8"]["out_of_distribution"].get<bool>());
+  EXPECT_FALSE(sw["per_command"].contains("straight"));
+
   // Bad inputs: one clear line, non-zero exit, nothing written.
+  r = test::run_gaia(base + " --only action --commands zigzag --out " + q(p.dir / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--commands"), std::string::npos) << r.output;
   if (K > 2) {  // rollouts shorter than the dynamics probe's window cannot be read back
     r = test::run_gaia(base + " --only action --frames " + std::to_string(K - 2) + " --out " + q(p.dir / "bad"));
     EXPECT_NE(r.status, 0);

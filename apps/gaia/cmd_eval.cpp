@@ -21,7 +21,7 @@ namespace {
 struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
-      action_negative = "mirror";
+      action_negative = "mirror", commands = "default";
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   int long_rollouts = control::RolloutEvalOptions{}.long_rollouts;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
@@ -54,6 +54,10 @@ void register_eval(CLI::App& app) {
                   "the unconditional branch of action guidance: mirror (the counter-command: turning the other way, "
                   "at the kept speed; default) or null (no actions, eq. 2 as in the paper)")
       ->check(CLI::IsMember({"null", "mirror"}));
+  cmd->add_option("--commands", e->commands,
+                  "action control's commands: default (straight, left, right, strong-left, strong-right, drift-right, "
+                  "slow, fast) or sweep (the steering response curve: 8 to 40 1/km right, 8 to 30 1/km left)")
+      ->check(CLI::IsMember({"default", "sweep"}));
   cmd->add_option("--scales", e->scales,
                   "guidance scales for text control (default 0,1,2,4,8; the last also runs with the negative prompt "
                   "and with the schedules)")
@@ -116,6 +120,7 @@ void register_eval(CLI::App& app) {
       o.sampling = sampling;
       o.guidance_scale = e->action_guidance;
       o.mirror_negative = e->action_negative == "mirror";
+      o.commands = e->commands;
       o.seed = uint64_t(run.run.seed);
       j["action_control"] = control::action_control(m, ds, raw.get(), o, out);
       bar.update(++done, "action control");

@@ -11,11 +11,19 @@
 
 namespace gaia::control {
 
-std::vector<Command> action_commands() {
-  return {{"straight", -1, 0.0, 0, false},        {"left", -1, 0.008, 0, false},
-          {"right", -1, -0.008, 0, false},        {"strong-left", -1, 0.03, 0, true},
-          {"strong-right", -1, -0.03, 0, true},   {"drift-right", -1, -0.002, -0.002, true},
-          {"slow", 3.0, 0.0, 0, false},           {"fast", 13.0, 0.0, 0, false}};
+std::vector<Command> action_commands(const std::string& set) {
+  if (set == "default")
+    return {{"straight", -1, 0.0, 0, false},        {"left", -1, 0.008, 0, false},
+            {"right", -1, -0.008, 0, false},        {"strong-left", -1, 0.03, 0, true},
+            {"strong-right", -1, -0.03, 0, true},   {"drift-right", -1, -0.002, -0.002, true},
+            {"slow", 3.0, 0.0, 0, false},           {"fast", 13.0, 0.0, 0, false}};
+  if (set == "sweep") {  // 1/km; beyond 12 (99% of the lane keeper's frames) counts as out of distribution
+    std::vector<Command> c;
+    for (int k : {-40, -30, -20, -14, -8, 8, 20, 30})
+      c.push_back({fmt::format("{}-{}", k < 0 ? "right" : "left", std::abs(k)), -1, k / 1000.0, 0, std::abs(k) > 12});
+    return c;
+  }
+  fail("unknown command set '{}' (default, sweep)", set);
 }
 
 namespace {
@@ -78,7 +86,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   if (F + 1 < m.dynamics->frames)  // the read-back starts at the last prompt frame
     fail("action control: the dynamics probe reads {} consecutive frames, so --frames must be at least {} (got {})",
          m.dynamics->frames, m.dynamics->frames - 1, F);
-  const auto cmds = action_commands();
+  const auto cmds = action_commands(o.commands);
   const int64_t C = int64_t(cmds.size()), R = int64_t(o.prompts) * C;
   auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed);
 
@@ -138,6 +146,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   j["generated_frames"] = F;
   j["guidance_scale"] = o.guidance_scale;
   j["negative_actions"] = o.mirror_negative ? "mirror" : "null";
+  j["commands"] = o.commands;
   j["generated_frames_per_second"] = double(R * F) / with.seconds;
   j["conditioned"] = agreement(cmd_speed, cmd_curv, rw, all);
   j["conditioned_in_distribution"] = agreement(cmd_speed, cmd_curv, rw, in_dist);

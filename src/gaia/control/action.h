@@ -22,7 +22,9 @@ struct Command {
 // straight, left, right (in distribution: |curvature| <= 0.012 1/m covers 99% of synth frames), strong-left,
 // strong-right (0.03 1/m, beyond any recorded curvature), drift-right (a growing pull off the lane, which the
 // recorded driver never does), slow and fast (speed commands, straight).
-std::vector<Command> action_commands();
+// "sweep": the steering response curve instead, turns of 8 to 40 1/km right and 8 to 30 1/km left at the kept speed,
+// to see where the model's read-back stops growing with the command (docs/evaluation.md, "Steering response").
+std::vector<Command> action_commands(const std::string& set = "default");
 
 struct ActionEvalOptions {
   int prompts = 8;            // held-out video prompts
@@ -37,6 +39,7 @@ struct ActionEvalOptions {
   // Guidance then contrasts turning right with turning left, and slow or fast with keeping the speed, instead of
   // either with no command; a straight command at the kept speed is not guided at all.
   bool mirror_negative = true;
+  std::string commands = "default";  // action_commands(): "default" or "sweep"
   uint64_t seed = 0;
 };
 
