@@ -57,7 +57,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--commands", e->commands,
                   "action control's commands: default (straight, left, right, strong-left, strong-right, drift-right, "
                   "slow, fast) or sweep (the steering response curve: 8 to 40 1/km right, 8 to 30 1/km left)")
-      ->check(CLI::IsMember({"default", "sweep"}));
+      ->check(CLI::IsMember(control::kCommandSets));
   cmd->add_option("--scales", e->scales,
                   "guidance scales for text control (default 0,1,2,4,8; the last also runs with the negative prompt "
                   "and with the schedules)")

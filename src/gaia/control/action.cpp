@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <fmt/ranges.h>
+
 #include "gaia/core/error.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/eval/svg_plot.h"
@@ -23,7 +25,7 @@ std::vector<Command> action_commands(const std::string& set) {
       c.push_back({fmt::format("{}-{}", k < 0 ? "right" : "left", std::abs(k)), -1, k / 1000.0, 0, std::abs(k) > 12});
     return c;
   }
-  fail("unknown command set '{}' (default, sweep)", set);
+  fail("unknown command set '{}' ({})", set, fmt::join(kCommandSets, ", "));
 }
 
 namespace {

@@ -24,6 +24,7 @@ struct Command {
 // growing pull off the lane, which the recorded driver never does), slow and fast (speed commands, straight).
 // "sweep": the steering response curve instead, turns of 8 to 40 1/km right and 8 to 30 1/km left at the kept speed,
 // to see where the model's read-back stops growing with the command (docs/evaluation.md, "Steering response").
+inline const std::vector<std::string> kCommandSets{"default", "sweep"};  // the sets action_commands() knows
 std::vector<Command> action_commands(const std::string& set = "default");
 
 struct ActionEvalOptions {
