@@ -252,6 +252,56 @@ TEST(WorldCli, FineTuneStartsFromInitWeightsAndKeepsTheirVocabulary) {
   EXPECT_NE(r.output.find("missing.safetensors"), std::string::npos) << r.output;
 }
 
+// --train-only with a new action MLP (world.action_mlp): only the named parameters move, the MLP the --init model
+// lacks starts from zero output and trains, everything else stays bit for bit; a prefix that names nothing is one
+// error line.
+TEST(WorldCli, FineTuneTrainsOnlyTheNamedParameters) {
+  auto& p = Pipeline::get();
+  if (!fs::exists(p.run / "world.safetensors")) {
+    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  const fs::path init = p.run / "world.safetensors", ft = p.dir / "action-mlp";
+  auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --init " + q(init) +
+                          " --set world.action_mlp=16 --set world.lr=1e-2 --set world.warmup_steps=0"
+                          " --train-only curvature_proj,curvature_mlp --steps 3 --val-every 100 --out " + q(ft));
+  ASSERT_EQ(r.status, 0) << r.output;
+  world::WorldInfo info;
+  auto m0 = world::load_world(init, torch::kCPU), m1 = world::load_world(ft / "world.safetensors", torch::kCPU, &info);
+  EXPECT_EQ(info.config.world.action_mlp, 16);
+  auto p0 = m0->named_parameters();
+  size_t same = 0, moved = 0;
+  for (auto& kv : m1->named_parameters()) {
+    const std::string& k = kv.key();
+    if (k.rfind("curvature_", 0) == 0) {
+      if (k == "curvature_mlp.2.weight" || k == "curvature_proj.weight") {
+        const auto* before = p0.find(k);
+        auto was = before ? *before : torch::zeros_like(kv.value());  // the new MLP's output layer starts at 0
+        EXPECT_FALSE(torch::equal(kv.value(), was)) << k;
+        ++moved;
+      }
+      continue;
+    }
+    if (k.rfind("speed_mlp.2.", 0) == 0) {  // not named: the new speed MLP keeps its zero output
+      EXPECT_EQ(kv.value().abs().max().item<double>(), 0.0) << k;
+      continue;
+    }
+    if (k.rfind("speed_mlp.", 0) == 0) continue;  // its (random) hidden layer
+    ASSERT_NE(p0.find(k), nullptr) << k;
+    EXPECT_TRUE(torch::equal(kv.value(), p0[k])) << k;
+    ++same;
+  }
+  EXPECT_EQ(moved, 2u);
+  EXPECT_GT(same, 10u);
+
+  r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --init " + q(init) +
+                     " --train-only curvature_proj,nosuch_layer --steps 1 --out " + q(p.dir / "bad-only"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--train-only: no world model parameter starts with 'nosuch_layer'"), std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad-only" / "world.safetensors"));
+}
+
 // gaia world calibrate: the fitted world.copy_bias is stored with the model, lowers the cross-entropy of the
 // training windows it was fitted on, and a second calibration of the result finds the same value (the fit starts
 // from the model's own bias). Bad flags are one error line with nothing written.
@@ -325,8 +375,20 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     ASSERT_EQ(w.size(), 1u) << it.key();
     EXPECT_NEAR(w[0].get<double>(), it.value()["read_curvature"].get<double>(), 1e-9) << it.key();
   }
-  for (const char* k : {"conditioned", "without_actions", "counterfactual_probe"})
+  for (const char* k : {"conditioned", "without_actions", "counterfactual_probe", "counterfactual_probe_tokenized"})
     EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
+  // Teacher-forced replay under the command and the counter-command: the straight command at the kept speed is its
+  // own counter-command, so the replay scores the same under both; every turn's gain is a finite number.
+  EXPECT_EQ(a["per_command"]["straight"]["replay_nats_gain_over_counter_command"].get<double>(), 0.0);
+  EXPECT_EQ(a["per_command"]["straight"]["replay_prefers_command"].get<double>(), 0.0);
+  for (const char* k : {"left", "right", "strong-left", "strong-right"}) {
+    const auto& c = a["per_command"][k];
+    EXPECT_TRUE(std::isfinite(c["replay_nats_gain_over_counter_command"].get<double>())) << k;
+    EXPECT_NE(c["replay_nats_gain_over_counter_command"].get<double>(), 0.0) << k;
+    EXPECT_TRUE(std::isfinite(c["read_curvature_counterfactual_tokenized"].get<double>())) << k;
+  }
+  EXPECT_GT(a["per_command"]["left"]["read_curvature_counterfactual"].get<double>(),
+            a["per_command"]["right"]["read_curvature_counterfactual"].get<double>());
   EXPECT_GT(a["counterfactual"]["psnr_db"].get<double>(), 5.0);
   EXPECT_GE(a["counterfactual"]["fd_probe"].get<double>(), 0.0);
   // Text: one row per scale, then the negative prompt and the schedules; accuracies are fractions.

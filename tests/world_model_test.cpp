@@ -6,6 +6,7 @@
 
 #include "gaia/core/config.h"
 #include "gaia/plan/plan.h"
+#include "gaia/train/checkpoint.h"
 #include "gaia/world/calibrate.h"
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
@@ -128,6 +129,42 @@ TEST(WorldModel, ParameterCountEqualsThePlan) {
     WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
     EXPECT_EQ(m->parameter_count(/*with_word_embedding=*/false), plan::world_params(c).total) << name;
   }
+}
+
+// world.action_mlp: the plan counts its parameters, a new MLP starts where the linear layers were (fine-tuning a
+// linear-action model changes nothing until it trains), and once trained the embedding is no longer affine in the
+// action, which is what it is for.
+TEST(WorldModel, ActionMlpStartsAtTheLinearEmbeddingAndBends) {
+  Config c = tiny(), cm = tiny();
+  cm.world.action_mlp = 8;
+  WorldModel with(cm.world, cm.image_tokens(), cm.tokenizer.codebook_size);
+  EXPECT_EQ(with->parameter_count(false), plan::world_params(cm).total);
+  EXPECT_GT(plan::world_params(cm).total, plan::world_params(c).total);
+
+  auto lin = small_model(c, 3), mlp = small_model(cm, 4);
+  train::init_from(*mlp, *lin, "linear", [](const std::string& k) { return k.find("_mlp.") != std::string::npos; });
+  auto b = random_batch(c, 2, 3);
+  b.actions.select(2, 1).copy_(torch::tensor({-2.0, -1.0, 0.0, 0.5, 1.0, 2.0}).view({2, 3}));  // normalised curvatures
+  torch::NoGradGuard ng;
+  EXPECT_TRUE(torch::allclose(lin->embed_actions(b), mlp->embed_actions(b), 0, 0));
+  EXPECT_TRUE(torch::allclose(lin->forward(b), mlp->forward(b), 1e-6, 1e-6));
+  // Any output weights: e(c) - e(0) is then not proportional to c. One step, five curvatures -2 .. 2.
+  mlp->curvature_mlp[2]->as<torch::nn::Linear>()->weight.normal_(0.0, 0.5);
+  auto b5 = random_batch(c, 5, 1);
+  b5.actions.select(2, 1).copy_(torch::tensor({-2.0, -1.0, 0.0, 1.0, 2.0}).view({5, 1}));
+  auto e = mlp->embed_actions(b5).select(1, 0).select(1, 1);  // [5, d] curvature tokens
+  auto el = lin->embed_actions(b5).select(1, 0).select(1, 1);
+  auto bend = [](const torch::Tensor& x, int i) {  // second difference at curvature i - 2
+    return (x[i + 1] - 2 * x[i] + x[i - 1]).abs().max().item<double>();
+  };
+  EXPECT_GT(bend(e, 3), 1e-3);
+  EXPECT_LT(bend(el, 3), 1e-5);  // the linear layer alone does not bend
+  // Left and right are no longer one direction with opposite signs.
+  EXPECT_GT((e[4] - e[2] + (e[0] - e[2])).abs().max().item<double>(), 1e-3);
+  EXPECT_LT((el[4] - el[2] + (el[0] - el[2])).abs().max().item<double>(), 1e-5);
+  Config bad = tiny();
+  bad.world.action_mlp = -1;
+  EXPECT_THROW(bad.validate(), std::exception);
 }
 
 TEST(WorldSampling, TopKNeverLeavesTheTopK) {

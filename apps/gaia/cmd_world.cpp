@@ -49,6 +49,10 @@ void register_world(CLI::App& app) {
     cmd->add_option("--init", o->init,
                     "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
                     "not carried over: run gaia world calibrate again afterwards)");
+    cmd->add_option("--train-only", o->train_only,
+                    "train only the parameters whose names start with these (comma-separated, e.g. "
+                    "speed_mlp,curvature_mlp); the rest stay as --init gave them")
+        ->delimiter(',');
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);

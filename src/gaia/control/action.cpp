@@ -8,6 +8,7 @@
 #include "gaia/eval/metrics.h"
 #include "gaia/eval/svg_plot.h"
 #include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
 #include "gaia/world/batch.h"
 #include "gaia/world/rollout.h"
 
@@ -77,6 +78,38 @@ double psnr_mean(const std::vector<cv::Mat>& a, const std::vector<cv::Mat>& b) {
   double s = 0;
   for (size_t i = 0; i < a.size(); ++i) s += eval::psnr(a[i], b[i]);
   return s / double(a.size());
+}
+
+// Does the world model know what a commanded turn looks like? Cross-entropy (nats per image token) of the
+// replay's codes after the prompt, teacher-forced, under each of the given action sequences [R, P + F, 2]:
+// -> [actions.size()][R]. A model that follows its actions scores the replay better under the command that made it
+// than under the counter-command; a gap in sampling shows when it does and its rollouts still do not turn.
+std::vector<std::vector<double>> replay_nats(Models& m, const torch::Tensor& prompt, const std::vector<torch::Tensor>& replay,
+                                             const std::vector<torch::Tensor>& actions) {
+  torch::NoGradGuard ng;
+  m.world->eval();
+  const int64_t R = prompt.size(0), batch = 16;
+  auto tokens = torch::cat({prompt, torch::stack(replay)}, 1);  // [R, P + F, n]
+  // Within the model's context: the last T steps, scoring the replay's frames among them (each after >= 1 frame).
+  const int64_t S = std::min(tokens.size(1), m.world->layout.T), drop = tokens.size(1) - S;
+  const int64_t F = std::min(replay.front().size(0), S - 1), P = S - F;
+  tokens = tokens.narrow(1, drop, S);
+  std::vector<std::vector<double>> out;
+  for (const auto& a : actions) {
+    std::vector<double> nats;
+    for (int64_t r0 = 0; r0 < R; r0 += batch) {
+      const int64_t b = std::min(batch, R - r0);
+      world::WorldBatch wb;
+      wb.tokens = tokens.narrow(0, r0, b);
+      wb.actions = a.narrow(0, r0, b).narrow(1, drop, S);
+      auto logits = m.world->forward(wb.to(m.dev)).narrow(1, P, F);  // [b, F, n, K]
+      auto target = wb.tokens.narrow(1, P, F).to(m.dev).unsqueeze(-1);
+      auto nll = -torch::log_softmax(logits, -1).gather(-1, target).squeeze(-1).mean({1, 2}).cpu();  // [b]
+      for (int64_t i = 0; i < b; ++i) nats.push_back(nll[i].item<double>());
+    }
+    out.push_back(nats);
+  }
+  return out;
 }
 
 }  // namespace
@@ -170,7 +203,8 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
 
   // Counterfactual replay of the procedural world under the same commands: ground truth for every rollout.
   std::vector<std::vector<cv::Mat>> truth(static_cast<size_t>(R));
-  Readback truth_read;  // the probe on the ground truth, per rollout
+  Readback truth_read, truth_coded_read;  // the probe on the ground truth (as rendered / through the tokenizer)
+  std::vector<std::vector<double>> truth_nats;  // [2][R]: the replay's codes under the command / the counter-command
   if (raw) {
     const int stride = int(std::lround(raw->episode(0).meta().fps / (ds.rate_hz() > 0 ? ds.rate_hz() : 6.25)));
     const fs::path cf = out.dir / "counterfactual";
@@ -193,6 +227,20 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     fs::remove_all(cf);  // frames on disk were only a means; the numbers and videos are what stays
     truth_read = read_rows(m, truth, 0);
     j["counterfactual_probe"] = agreement(cmd_speed, cmd_curv, truth_read, all);  // the probe on ground truth: the ceiling
+    // The same ground truth through the tokenizer (encode, decode): what the probe reads of a perfect world model,
+    // since every rollout reaches the probe through the tokenizer's decoder.
+    std::vector<std::vector<cv::Mat>> truth_coded;
+    std::vector<torch::Tensor> truth_codes;  // [F, n] per rollout: the replay's generated frames as codes
+    for (const auto& row : truth) {
+      auto codes = tokenizer::encode_frames(m.tok, row, m.dev);  // [F + 1, h, w]
+      truth_codes.push_back(codes.narrow(0, 1, F).reshape({F, -1}).cpu());
+      truth_coded.push_back(decode(m, codes.reshape({1, codes.size(0), -1}))[0]);
+    }
+    truth_coded_read = read_rows(m, truth_coded, 0);
+    j["counterfactual_probe_tokenized"] = agreement(cmd_speed, cmd_curv, truth_coded_read, all);
+    truth_nats = replay_nats(m, pr.tokens.repeat_interleave(C, 0), truth_codes,
+                             {cond.actions, cond.negative_actions.defined() ? cond.negative_actions
+                                                                            : world::counter_actions(cond.actions, P - 1)});
     double pw = 0, pn = 0;
     std::vector<torch::Tensor> fg, ft, fnull;
     for (int64_t r = 0; r < R; ++r) {
@@ -230,8 +278,15 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       cs += cmd_speed[r] / o.prompts;
       rs += rw.speed[r] / o.prompts;
     }
+    double tc = 0, gap = 0, prefer = 0;
     if (raw)
-      for (int i = 0; i < o.prompts; ++i) t += truth_read.curvature[size_t(i * C + c)] / o.prompts;
+      for (int i = 0; i < o.prompts; ++i) {
+        const size_t r = size_t(i * C + c);
+        t += truth_read.curvature[r] / o.prompts;
+        tc += truth_coded_read.curvature[r] / o.prompts;
+        gap += (truth_nats[1][r] - truth_nats[0][r]) / o.prompts;
+        prefer += (truth_nats[0][r] < truth_nats[1][r]) / double(o.prompts);
+      }
     names.push_back(cmds[size_t(c)].name);
     s_cmd.y.push_back(cmd_curv[size_t(c)] * 1000);
     s_with.y.push_back(a * 1000);
@@ -241,6 +296,13 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
                                  {"read_curvature_by_window", by_window},
                                  {"read_curvature_without_actions", b}, {"commanded_speed", cs}, {"read_speed", rs},
                                  {"out_of_distribution", cmds[size_t(c)].out_of_distribution}};
+    if (raw) {
+      per[cmds[size_t(c)].name]["read_curvature_counterfactual"] = t;
+      per[cmds[size_t(c)].name]["read_curvature_counterfactual_tokenized"] = tc;
+      // Teacher-forced: how much better the replay scores under its command than under the counter-command.
+      per[cmds[size_t(c)].name]["replay_nats_gain_over_counter_command"] = gap;
+      per[cmds[size_t(c)].name]["replay_prefers_command"] = prefer;
+    }
   }
   j["per_command"] = per;
   std::vector<eval::Series> series{s_cmd, s_with, s_null};

@@ -111,6 +111,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("world.text_dim", &w.text_dim));
   f.push_back(field("world.text_vocab", &w.text_vocab));
   f.push_back(field("world.action_tokens", &w.action_tokens));
+  f.push_back(field("world.action_mlp", &w.action_mlp));
   f.push_back(field("world.dropout", &w.dropout));
   f.push_back(field("world.p_uncond", &w.p_uncond));
   f.push_back(field("world.p_action", &w.p_action));
@@ -238,6 +239,7 @@ void Config::validate() const {
        "tokenizer.res_blocks must be >= 1 and tokenizer.refine_blocks, tokenizer.token_blocks >= 0");
   need(world.d_model % world.n_heads == 0, "world.d_model must be divisible by world.n_heads");
   need(world.action_tokens == 2, "world.action_tokens must be 2 (speed, curvature; paper §2.1)");
+  need(world.action_mlp >= 0, "world.action_mlp must be >= 0 (hidden units; 0 = one linear layer per action)");
   // m >= 1: the first image token of a step is predicted from the last text token before it.
   need(world.context_steps >= 1 && world.text_tokens >= 1, "world.context_steps >= 1 and world.text_tokens >= 1");
   double p = world.p_uncond + world.p_action + world.p_text;

@@ -68,6 +68,10 @@ struct WorldConfig {
   int text_dim = 128;            // width of text embeddings fed to the linear layer (T5-large: 1024)
   int text_vocab = 2048;         // built-in word vocabulary size
   int action_tokens = 2;         // l; paper §2.1: speed and curvature
+  // Hidden units of a small MLP (1 -> h -> d, GELU) added to each action's linear layer; 0 = the paper's linear
+  // layer alone (§2.1). Why: a linear embedding is one direction scaled by the value, and the CPU model read a
+  // strong right turn (-30 1/km) as no turn at all, a left one even (docs/evaluation.md, "Steering response").
+  int action_mlp = 0;
   double dropout = 0.0;
   // paper §4.2 conditioning mix: unconditional / action / text = 20% / 40% / 40%
   double p_uncond = 0.2, p_action = 0.4, p_text = 0.4;

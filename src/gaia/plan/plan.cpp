@@ -82,6 +82,7 @@ ParamCount world_params(const Config& cfg) {
   // action scalar (1 -> d), learned null tokens for dropped text / actions, T temporal + (m + n + l) spatial.
   int64_t emb = K * d + linear(w.text_dim, d) + l * linear(1, d) + (m + l) * d + int64_t(w.context_steps) * d +
                 (m + n + l) * d;
+  if (w.action_mlp > 0) emb += l * (linear(1, w.action_mlp) + linear(w.action_mlp, d));  // world.action_mlp
   // Pre-LN GPT block: LN, causal self-attention (qkv + proj), LN, 4d MLP.
   int64_t block = layer_norm(d) + linear(d, 3 * d) + linear(d, d) + layer_norm(d) + linear(d, 4 * d) + linear(4 * d, d);
   int64_t body = w.n_layers * block + layer_norm(d);

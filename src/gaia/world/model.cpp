@@ -16,6 +16,14 @@ WorldModelImpl::WorldModelImpl(const WorldConfig& c, int64_t n, int64_t K_) : cf
   text_proj = register_module("text_proj", torch::nn::Linear(c.text_dim, d));
   speed_proj = register_module("speed_proj", torch::nn::Linear(1, d));
   curvature_proj = register_module("curvature_proj", torch::nn::Linear(1, d));
+  if (c.action_mlp > 0) {
+    auto mlp = [&](const char* name) {
+      return register_module(name, torch::nn::Sequential(torch::nn::Linear(1, c.action_mlp), torch::nn::GELU(),
+                                                         torch::nn::Linear(c.action_mlp, d)));
+    };
+    speed_mlp = mlp("speed_mlp");
+    curvature_mlp = mlp("curvature_mlp");
+  }
   // GPT-2 style small-normal initialisation of the learned tokens and positions.
   null_text = register_parameter("null_text", torch::randn({layout.m, d}) * 0.02);
   null_action = register_parameter("null_action", torch::randn({layout.l, d}) * 0.02);
@@ -33,6 +41,17 @@ WorldModelImpl::WorldModelImpl(const WorldConfig& c, int64_t n, int64_t K_) : cf
     // GPT-2: residual projections scaled by 1/sqrt(2 * layers) so the residual stream does not grow with depth.
     if (k.find("proj.weight") != std::string::npos && k.find("blocks") != std::string::npos)
       p.value().normal_(0.0, 0.02 / std::sqrt(2.0 * c.n_layers));
+  }
+  // The action MLPs' kinks spread over the inputs' range (about [-2, 2] normalised, batch.h), and their output
+  // starts at zero: a new MLP leaves the linear layers' embedding as it was (fine-tuning from a model without one).
+  for (auto* mlp : {&speed_mlp, &curvature_mlp}) {
+    if (!*mlp) continue;
+    torch::NoGradGuard ng;
+    auto first = (*mlp)[0]->as<torch::nn::Linear>(), last = (*mlp)[2]->as<torch::nn::Linear>();
+    first->weight.normal_(0.0, 1.0);
+    first->bias.uniform_(-2.0, 2.0);
+    last->weight.zero_();
+    last->bias.zero_();
   }
 }
 
@@ -78,8 +97,13 @@ torch::Tensor WorldModelImpl::embed_actions(const WorldBatch& b, int64_t t0) {
     auto a = b.actions.to(torch::kFloat);
     auto missing = torch::isnan(a);                          // [B, T, 2]
     auto a0 = torch::where(missing, torch::zeros_like(a), a);  // keep NaN out of the graph
-    auto e = torch::stack({speed_proj->forward(a0.narrow(2, 0, 1)), curvature_proj->forward(a0.narrow(2, 1, 1))},
-                          2);                                // [B, T, 2, d]
+    auto speed = a0.narrow(2, 0, 1), curvature = a0.narrow(2, 1, 1);  // [B, T, 1] each
+    auto es = speed_proj->forward(speed), ec = curvature_proj->forward(curvature);  // [B, T, d] each
+    if (speed_mlp) {
+      es = es + speed_mlp->forward(speed);
+      ec = ec + curvature_mlp->forward(curvature);
+    }
+    auto e = torch::stack({es, ec}, 2);                      // [B, T, 2, d]
     x = torch::where(missing.unsqueeze(-1), null, e);
     x = choose(b.use_action, x, null);
   }

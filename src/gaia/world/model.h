@@ -4,6 +4,7 @@
 //   inputs per step t:   c_t  [m, text_dim] -> text_proj          (or the learned null text when dropped)
 //                        z_t  [n] ids       -> token_embedding
 //                        a_t  [2] scalars   -> speed_proj, curvature_proj (one linear layer each; null if dropped)
+//                                              (+ speed_mlp, curvature_mlp: 1 -> h -> d when world.action_mlp = h > 0)
 //   + temporal_pos[t] (shared by the step) + spatial_pos[slot]    (factorised positions, §2.1)
 //   -> n_layers pre-LN blocks (causal) -> ln_f -> head over K image codes
 //
@@ -47,6 +48,7 @@ struct WorldModelImpl : torch::nn::Module {
   torch::nn::Embedding word_embedding{nullptr};    // [text_vocab, text_dim]: the built-in text encoder
   torch::nn::Linear text_proj{nullptr};            // text_dim -> d
   torch::nn::Linear speed_proj{nullptr}, curvature_proj{nullptr};  // 1 -> d each (§2.1: one layer per action)
+  torch::nn::Sequential speed_mlp{nullptr}, curvature_mlp{nullptr};  // 1 -> h -> d, added; only when action_mlp > 0
   torch::Tensor null_text, null_action;            // [m, d], [l, d] learned "no conditioning" tokens
   torch::Tensor temporal_pos, spatial_pos;         // [T, d], [S, d]
   torch::nn::ModuleList blocks{nullptr};

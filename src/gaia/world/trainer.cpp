@@ -15,6 +15,27 @@
 
 namespace gaia::world {
 
+namespace {
+
+// The parameters a run trains (WorldTrainOptions::train_only); the others get requires_grad = false.
+std::vector<torch::Tensor> trained_parameters(torch::nn::Module& model, const std::vector<std::string>& prefixes) {
+  if (prefixes.empty()) return model.parameters();
+  std::vector<torch::Tensor> out;
+  std::vector<bool> used(prefixes.size(), false);
+  for (auto& p : model.named_parameters()) {
+    bool train = false;
+    for (size_t i = 0; i < prefixes.size(); ++i)
+      if (p.key().rfind(prefixes[i], 0) == 0) train = used[i] = true;
+    p.value().set_requires_grad(train);
+    if (train) out.push_back(p.value());
+  }
+  for (size_t i = 0; i < prefixes.size(); ++i)
+    if (!used[i]) fail("--train-only: no world model parameter starts with '{}'", prefixes[i]);
+  return out;
+}
+
+}  // namespace
+
 WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
                              const std::function<void(const WorldStepLog&)>& on_step,
                              const std::function<void(const std::string&)>& on_note) {
@@ -57,7 +78,8 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   torch::manual_seed(cfg.run.seed);
   WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
   model->to(dev);
-  auto optim = train::make_adamw(model->parameters(), wc.lr, wc.weight_decay, wc.beta1, wc.beta2);
+  auto trained = trained_parameters(*model, opt.train_only);
+  auto optim = train::make_adamw(trained, wc.lr, wc.weight_decay, wc.beta1, wc.beta2);
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
@@ -70,7 +92,11 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
   } else if (init) {
-    train::init_from(*model, *init, opt.init);  // fresh optimiser and schedule
+    // Fresh optimiser and schedule. Action MLPs the --init model lacks start at zero output (model.cpp), so a
+    // linear-action model fine-tunes into one with world.action_mlp > 0 from where it was.
+    train::init_from(*model, *init, opt.init, [](const std::string& k) {
+      return k.rfind("speed_mlp.", 0) == 0 || k.rfind("curvature_mlp.", 0) == 0;
+    });
     note("initialised from " + opt.init.string());
   }
   init = nullptr;
@@ -110,7 +136,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
     optim->zero_grad();
     loss.backward();
-    const double gn = train::clip_grad_norm(model->parameters(), wc.grad_clip);
+    const double gn = train::clip_grad_norm(trained, wc.grad_clip);
     optim->step();
     ++step;
     WorldStepLog log;

@@ -20,6 +20,10 @@ struct WorldTrainOptions {
   int val_every = 250;
   size_t val_windows = 64;    // held-out windows scored at each validation
   int stop_after = -1;        // stop (with a checkpoint) after this many steps of this run
+  // Train only the parameters whose names start with one of these (e.g. "curvature_mlp"); empty = all. The rest
+  // stay as --init gave them: a fine-tune of the action embedding leaves text-only and unconditional outputs as
+  // they were.
+  std::vector<std::string> train_only;
 };
 
 struct WorldStepLog {
