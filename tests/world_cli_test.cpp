@@ -386,6 +386,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     EXPECT_TRUE(std::isfinite(c["replay_nats_gain_over_counter_command"].get<double>())) << k;
     EXPECT_NE(c["replay_nats_gain_over_counter_command"].get<double>(), 0.0) << k;
     EXPECT_TRUE(std::isfinite(c["read_curvature_counterfactual_tokenized"].get<double>())) << k;
+    EXPECT_TRUE(std::isfinite(c["replay_nats_gain_over_no_action"].get<double>())) << k;
   }
   EXPECT_GT(a["per_command"]["left"]["read_curvature_counterfactual"].get<double>(),
             a["per_command"]["right"]["read_curvature_counterfactual"].get<double>());

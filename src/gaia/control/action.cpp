@@ -204,7 +204,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   // Counterfactual replay of the procedural world under the same commands: ground truth for every rollout.
   std::vector<std::vector<cv::Mat>> truth(static_cast<size_t>(R));
   Readback truth_read, truth_coded_read;  // the probe on the ground truth (as rendered / through the tokenizer)
-  std::vector<std::vector<double>> truth_nats;  // [2][R]: the replay's codes under the command / the counter-command
+  std::vector<std::vector<double>> truth_nats;  // [3][R]: the replay's codes under the command / counter-command / none
   if (raw) {
     const int stride = int(std::lround(raw->episode(0).meta().fps / (ds.rate_hz() > 0 ? ds.rate_hz() : 6.25)));
     const fs::path cf = out.dir / "counterfactual";
@@ -239,8 +239,10 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     truth_coded_read = read_rows(m, truth_coded, 0);
     j["counterfactual_probe_tokenized"] = agreement(cmd_speed, cmd_curv, truth_coded_read, all);
     truth_nats = replay_nats(m, pr.tokens.repeat_interleave(C, 0), truth_codes,
-                             {cond.actions, cond.negative_actions.defined() ? cond.negative_actions
-                                                                            : world::counter_actions(cond.actions, P - 1)});
+                             {cond.actions,
+                              cond.negative_actions.defined() ? cond.negative_actions
+                                                              : world::counter_actions(cond.actions, P - 1),
+                              null_actions.actions});
     double pw = 0, pn = 0;
     std::vector<torch::Tensor> fg, ft, fnull;
     for (int64_t r = 0; r < R; ++r) {
@@ -278,7 +280,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       cs += cmd_speed[r] / o.prompts;
       rs += rw.speed[r] / o.prompts;
     }
-    double tc = 0, gap = 0, prefer = 0;
+    double tc = 0, gap = 0, prefer = 0, gain_null = 0;
     if (raw)
       for (int i = 0; i < o.prompts; ++i) {
         const size_t r = size_t(i * C + c);
@@ -286,6 +288,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
         tc += truth_coded_read.curvature[r] / o.prompts;
         gap += (truth_nats[1][r] - truth_nats[0][r]) / o.prompts;
         prefer += (truth_nats[0][r] < truth_nats[1][r]) / double(o.prompts);
+        gain_null += (truth_nats[2][r] - truth_nats[0][r]) / o.prompts;
       }
     names.push_back(cmds[size_t(c)].name);
     s_cmd.y.push_back(cmd_curv[size_t(c)] * 1000);
@@ -302,6 +305,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       // Teacher-forced: how much better the replay scores under its command than under the counter-command.
       per[cmds[size_t(c)].name]["replay_nats_gain_over_counter_command"] = gap;
       per[cmds[size_t(c)].name]["replay_prefers_command"] = prefer;
+      per[cmds[size_t(c)].name]["replay_nats_gain_over_no_action"] = gain_null;  // ... than under null actions
     }
   }
   j["per_command"] = per;
