@@ -69,8 +69,9 @@ struct WorldConfig {
   int text_vocab = 2048;         // built-in word vocabulary size
   int action_tokens = 2;         // l; paper §2.1: speed and curvature
   // Hidden units of a small MLP (1 -> h -> d, GELU) added to each action's linear layer; 0 = the paper's linear
-  // layer alone (§2.1). Why: a linear embedding is one direction scaled by the value, and the CPU model read a
-  // strong right turn (-30 1/km) as no turn at all, a left one even (docs/evaluation.md, "Steering response").
+  // layer alone (§2.1). A linear embedding is one direction scaled by the value; the MLP lets left and right differ
+  // by more than a sign. Tried on the CPU model's misread strong right turns, it did not fix them
+  // (docs/evaluation.md, "Steering response"), so the shipped model has none.
   int action_mlp = 0;
   double dropout = 0.0;
   // paper §4.2 conditioning mix: unconditional / action / text = 20% / 40% / 40%
