@@ -156,8 +156,10 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   world::RolloutPrompt null_actions = cond;  // the baseline: null action tokens from the last prompt step on,
   null_actions.actions = cond.actions.clone();  // guided towards the prompt's own actions against null ones
   null_actions.actions.narrow(1, P - 1, F + 1).fill_(std::nan(""));  // (a struct copy shares the tensors' storage)
-  if (o.mirror_negative)  // the counter-command: turn the other way at the speed the steering commands keep
-    cond.negative_actions = world::counter_actions(cond.actions, P - 1, torch::tensor(kept_speed));
+  // The counter-command: turn the other way at the speed the steering commands keep (guidance's negative by
+  // default, and what the replay is scored against).
+  const auto counter = world::counter_actions(cond.actions, P - 1, torch::tensor(kept_speed));
+  if (o.mirror_negative) cond.negative_actions = counter;
 
   world::RolloutOptions ro;
   ro.frames = int(F);
@@ -239,10 +241,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     truth_coded_read = read_rows(m, truth_coded, 0);
     j["counterfactual_probe_tokenized"] = agreement(cmd_speed, cmd_curv, truth_coded_read, all);
     truth_nats = replay_nats(m, pr.tokens.repeat_interleave(C, 0), truth_codes,
-                             {cond.actions,
-                              cond.negative_actions.defined() ? cond.negative_actions
-                                                              : world::counter_actions(cond.actions, P - 1),
-                              null_actions.actions});
+                             {cond.actions, counter, null_actions.actions});
     double pw = 0, pn = 0;
     std::vector<torch::Tensor> fg, ft, fnull;
     for (int64_t r = 0; r < R; ++r) {
@@ -300,12 +299,13 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
                                  {"read_curvature_without_actions", b}, {"commanded_speed", cs}, {"read_speed", rs},
                                  {"out_of_distribution", cmds[size_t(c)].out_of_distribution}};
     if (raw) {
-      per[cmds[size_t(c)].name]["read_curvature_counterfactual"] = t;
-      per[cmds[size_t(c)].name]["read_curvature_counterfactual_tokenized"] = tc;
-      // Teacher-forced: how much better the replay scores under its command than under the counter-command.
-      per[cmds[size_t(c)].name]["replay_nats_gain_over_counter_command"] = gap;
-      per[cmds[size_t(c)].name]["replay_prefers_command"] = prefer;
-      per[cmds[size_t(c)].name]["replay_nats_gain_over_no_action"] = gain_null;  // ... than under null actions
+      auto& row = per[cmds[size_t(c)].name];
+      row["read_curvature_counterfactual"] = t;
+      row["read_curvature_counterfactual_tokenized"] = tc;
+      // Teacher-forced: how much better the replay scores under its command than under the counter-command / none.
+      row["replay_nats_gain_over_counter_command"] = gap;
+      row["replay_prefers_command"] = prefer;
+      row["replay_nats_gain_over_no_action"] = gain_null;
     }
   }
   j["per_command"] = per;
