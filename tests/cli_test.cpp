@@ -30,7 +30,7 @@ fs::path make_video(const fs::path& dir, int n) {
 
 TEST(Cli, HelpForEverySubcommand) {
   for (std::string sub : {"", "demo", "plan", "ingest", "data", "data stats", "data split", "data info", "synth",
-                          "synth replay", "tokenizer", "tokenizer train", "tokenizer eval", "tokenize", "world",
+                          "synth replay", "synth counterfactuals", "tokenizer", "tokenizer train", "tokenizer eval", "tokenize", "world",
                           "world train", "world eval", "generate", "decoder", "decoder train", "decoder eval", "decode",
                           "probe", "probe train", "probe eval", "convert"}) {
     auto r = test::run_gaia(sub + " --help");

@@ -1,6 +1,7 @@
 // gaia synth / gaia synth replay through the binary: determinism across thread counts, replay files,
 // and clear errors.
 #include "gaia/data/episode.h"
+#include "gaia/data/geofence.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -45,4 +46,29 @@ TEST(SynthCli, ReplayWritesAnEpisodeAndRejectsBadActions) {
   auto w = test::run_gaia("synth --weather hail --out '" + (dir / "x").string() + "'");
   EXPECT_NE(w.status, 0);
   EXPECT_NE(w.output.find("hail"), std::string::npos) << w.output;
+}
+
+// gaia synth counterfactuals replays the training split only: no held-out drive (what gaia eval prompts with) is
+// ever shown to the world model under another command. Bad flags are one clear line.
+TEST(SynthCli, CounterfactualsReplayOnlyTheTrainingDrives) {
+  test::TempDir dir;
+  ASSERT_EQ(test::run_gaia("synth --episodes 12 --seconds 1.2 --size 32x64 --seed 3 --out '" + (dir / "ds").string() + "'").status, 0);
+  data::Dataset ds(dir / "ds");
+  const data::Split split = data::load_or_default_split(ds, 0.1, 3);
+  ASSERT_FALSE(split.held_out().empty());
+  auto r = test::run_gaia("synth counterfactuals '" + (dir / "ds").string() + "' --per-episode 2 --lead 0.4 --hold 0.4 " +
+                          "--seed 3 --out '" + (dir / "cf").string() + "'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  data::Dataset cf(dir / "cf");
+  EXPECT_EQ(cf.size(), split.train.size() * 2);
+  for (size_t e = 0; e < cf.size(); ++e) {
+    const std::string src = cf.meta(e).extra.at("replay_of");
+    EXPECT_NE(std::find(split.train.begin(), split.train.end(), src), split.train.end()) << src;
+  }
+  auto same_dir = test::run_gaia("synth counterfactuals '" + (dir / "ds").string() + "' --out '" + (dir / "ds").string() + "'");
+  EXPECT_NE(same_dir.status, 0);
+  EXPECT_NE(same_dir.output.find("--out must not be the source"), std::string::npos) << same_dir.output;
+  auto bad = test::run_gaia("synth counterfactuals '" + (dir / "ds").string() + "' --hold 0 --out '" + (dir / "cf5").string() + "'");
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("hold"), std::string::npos) << bad.output;
 }

@@ -14,6 +14,7 @@
 
 #include "gaia/core/error.h"
 #include "gaia/synth/caption.h"
+#include "gaia/synth/counterfactual.h"
 #include "gaia/synth/rng.h"
 #include "gaia/synth/synth.h"
 
@@ -397,6 +398,68 @@ TEST(Synth, ReplayReproducesRecordedActionsAndDivergesUnderOthers) {
   EXPECT_GT(left_ep.labels(last)["lane_offset_m"].get<double>(), orig.labels(from + last)["lane_offset_m"].get<double>() + 1.0);
   // A start frame beyond the episode is a clear error.
   EXPECT_THROW(gs::replay(orig, orig.size() + 1, rec, tmp.path / "replay", "bad"), gaia::Error);
+}
+
+// Counterfactual augmentation: each replay follows its source's recorded driving (same frames) for the lead,
+// then holds one command within the bounds; it is deterministic, resumes, and a replay cannot be replayed again.
+TEST(Synth, CounterfactualsFollowTheRecordingThenHoldACommand) {
+  TempDir tmp;
+  auto o = small(43, 3.0);
+  std::vector<std::string> ids;
+  for (int i = 0; i < 2; ++i) ids.push_back(gs::write_episode(tmp.path / "orig", o, i).id);
+  gaia::data::Dataset ds(tmp.path / "orig");
+  gs::CounterfactualOptions co;
+  co.per_episode = 3, co.lead_seconds = 0.5, co.hold_seconds = 1.0, co.max_curvature = 0.04, co.min_speed = 4.0;
+  co.seed = 5;
+  int64_t last_done = -1;
+  EXPECT_EQ(gs::write_counterfactuals(ds, ids, co, tmp.path / "cf", [&](int64_t d, int64_t t) {
+              EXPECT_EQ(t, 6);
+              EXPECT_GE(d, last_done);
+              last_done = d;
+            }), 6);
+  EXPECT_EQ(last_done, 6);
+  gaia::data::Dataset cf(tmp.path / "cf");
+  ASSERT_EQ(cf.size(), 6u);
+  const int64_t lead = std::llround(0.5 * o.fps), hold = std::llround(1.0 * o.fps);
+  std::set<float> curvatures;
+  for (size_t e = 0; e < cf.size(); ++e) {
+    const gaia::data::Episode r = cf.episode(e);
+    const auto& src_id = r.meta().extra.at("replay_of");
+    EXPECT_EQ(r.meta().id.substr(0, src_id.size()), src_id);
+    const gaia::data::Episode src(tmp.path / "orig" / "episodes" / src_id);
+    const int64_t from = std::stoll(r.meta().extra.at("replay_from"));
+    ASSERT_EQ(r.size(), lead + hold);
+    ASSERT_LE(from + lead + hold, src.size());
+    for (int64_t i = 0; i < lead; ++i) {
+      EXPECT_EQ(r.speed(i), src.speed(from + i));
+      EXPECT_EQ(r.curvature(i), src.curvature(from + i));
+      EXPECT_TRUE(same(r.frame_bgr(i), src.frame_bgr(from + i)) || psnr(r.frame_bgr(i), src.frame_bgr(from + i)) > 40) << i;
+    }
+    const float k = r.curvature(lead);
+    EXPECT_LE(std::abs(k), 0.04f);
+    EXPECT_GE(r.speed(lead), 4.0f);
+    for (int64_t i = lead; i < r.size(); ++i) {
+      EXPECT_EQ(r.curvature(i), k);
+      EXPECT_EQ(r.speed(i), r.speed(lead));
+    }
+    curvatures.insert(k);
+  }
+  EXPECT_EQ(curvatures.size(), 6u);  // every replay draws its own command
+  // Deterministic: the same options write the same replays elsewhere; a second run into the same place resumes.
+  EXPECT_EQ(gs::write_counterfactuals(ds, ids, co, tmp.path / "cf2"), 6);
+  for (auto& id : cf.ids())
+    for (auto f : {"frames.bin", "speed.npy", "curvature.npy", "captions.jsonl"})
+      EXPECT_EQ(gaia::read_file(tmp.path / "cf" / "episodes" / id / f), gaia::read_file(tmp.path / "cf2" / "episodes" / id / f)) << id << f;
+  EXPECT_EQ(gs::write_counterfactuals(ds, ids, co, tmp.path / "cf"), 0);
+  // A replay starts mid-drive: it cannot be replayed, and says which episode to replay instead.
+  try {
+    gs::replay(cf.episode(0), 0, {gs::ActionStep{5, 0}}, tmp.path / "cf3", "x");
+    ADD_FAILURE() << "replaying a replay should fail";
+  } catch (const gaia::Error& err) {
+    EXPECT_NE(std::string(err.what()).find("itself a replay"), std::string::npos) << err.what();
+  }
+  co.per_episode = 0;
+  EXPECT_THROW(gs::write_counterfactuals(ds, ids, co, tmp.path / "cf4"), gaia::Error);
 }
 
 TEST(Synth, OncomingVehicleSwervesWhenEgoDriftsIntoItsLane) {

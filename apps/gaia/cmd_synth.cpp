@@ -5,6 +5,8 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
+#include "gaia/data/geofence.h"
+#include "gaia/synth/counterfactual.h"
 #include "gaia/synth/synth.h"
 
 namespace gaia::app {
@@ -46,7 +48,7 @@ void register_synth(CLI::App& app) {
   cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
   add_shared_flags(cmd, flags.get(), "dataset directory");
   cmd->callback([=] {
-    if (cmd->got_subcommand("replay")) return;
+    if (cmd->got_subcommand("replay") || cmd->got_subcommand("counterfactuals")) return;
     Config c = resolve_config(*flags);
     apply_threads(c);
     if (flags->out.empty()) fail("gaia synth: --out DATASET is required");
@@ -86,6 +88,39 @@ void register_synth(CLI::App& app) {
     auto m = synth::replay(ep, *from, acts, rflags->out, out_id, *overwrite);
     std::printf("replayed %s from frame %lld with %zu actions -> %s/episodes/%s\n", ep.meta().id.c_str(),
                 (long long)*from, acts.size(), rflags->out.c_str(), m.id.c_str());
+  });
+
+  auto* cfc = cmd->add_subcommand(
+      "counterfactuals",
+      "replays of a dataset's training drives that hold a random steering command after a stretch of the recorded "
+      "driving (training data for action control; docs/synth.md)");
+  auto cflags = std::make_shared<SharedFlags>();
+  auto co = std::make_shared<synth::CounterfactualOptions>();
+  auto source = std::make_shared<std::string>();
+  cfc->add_option("DATASET", *source, "synth dataset whose training-split drives are replayed")->required();
+  cfc->add_option("--per-episode", co->per_episode, "replays of each drive, each from its own random start");
+  cfc->add_option("--lead", co->lead_seconds, "seconds of the recorded driving before the command");
+  cfc->add_option("--hold", co->hold_seconds, "seconds the command is held");
+  cfc->add_option("--max-curvature", co->max_curvature, "the command's curvature is uniform in [-max, max], 1/m");
+  cfc->add_option("--min-speed", co->min_speed, "the command keeps the recorded speed, at least this, m/s");
+  add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)");
+  cfc->callback([=] {
+    Config c = resolve_config(*cflags);
+    apply_threads(c);
+    if (cflags->out.empty()) fail("gaia synth counterfactuals: --out DATASET is required");
+    if (fs::weakly_canonical(cflags->out) == fs::weakly_canonical(*source))
+      fail("gaia synth counterfactuals: --out must not be the source dataset {}", *source);
+    data::Dataset ds(*source);
+    // Held-out drives are never replayed: their prompts are what gaia eval and validation measure.
+    const data::Split split = data::load_or_default_split(ds, 0.1, c.run.seed);
+    synth::CounterfactualOptions opt = *co;
+    opt.seed = c.run.seed;
+    ProgressBar bar(static_cast<int64_t>(split.train.size()) * opt.per_episode, "counterfactuals");
+    const int64_t n = synth::write_counterfactuals(ds, split.train, opt, cflags->out,
+                                                   [&](int64_t done, int64_t) { bar.update(done); });
+    bar.finish();
+    std::printf("wrote %lld replays of %zu training drives (%zu held out, not replayed) -> %s\n", (long long)n,
+                split.train.size(), split.held_out().size(), cflags->out.c_str());
   });
 }
 

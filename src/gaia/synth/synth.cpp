@@ -142,6 +142,9 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
   if (auto w = m.extra.find("synth_swerve"); w != m.extra.end())
     o.swerve = parse_double(w->second, where.string() + ": synth_swerve");
   o.overwrite = overwrite;
+  // A replay starts mid-drive, so its recorded actions cannot rebuild the world from the start: replay its source.
+  if (m.extra.count("replay_of"))
+    fail("{}: is itself a replay (of {}); replay that episode instead", where.string(), m.extra.at("replay_of"));
   if (from < 0 || from > original.size())
     fail("{}: replay start frame {} is outside [0, {}]", where.string(), from, original.size());
   if (actions.empty()) fail("replay of {}: no actions given", m.id);
