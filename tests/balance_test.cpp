@@ -153,7 +153,12 @@ TEST(Mirror, SwapsSidesInWordsAndLabelsButNotIntensifiers) {
   EXPECT_EQ(mirror_labels(m), l);  // an involution
 }
 
-TEST(Mirror, MirrorImagesAreHeldOutWithTheirSource) {
+TEST(Mirror, MirrorImagesAndReplaysAreHeldOutWithTheirSource) {
+  EXPECT_EQ(split_source_id("e7-cf03"), "e7");
+  EXPECT_EQ(split_source_id("e7-cf03-mirror"), "e7");
+  EXPECT_EQ(split_source_id("e7-mirror"), "e7");
+  for (const char* id : {"e7", "e7-cf", "-cf03", "e7-cfx3", "e7-cf03x", "e7-cf03-mirror-mirror"})
+    EXPECT_EQ(split_source_id(id), mirror_source_id(id)) << id;  // nothing else is taken for a replay
   EXPECT_EQ(mirrored_id("e7"), "e7-mirror");
   EXPECT_EQ(mirror_source_id("e7-mirror"), "e7");
   EXPECT_EQ(mirror_source_id("e7"), "e7");
@@ -164,6 +169,8 @@ TEST(Mirror, MirrorImagesAreHeldOutWithTheirSource) {
     const bool v = held_out_at_random(id, 0.2, 3);
     held += v;
     EXPECT_EQ(held_out_at_random(mirrored_id(id), 0.2, 3), v) << id;
+    EXPECT_EQ(held_out_at_random(id + "-cf03", 0.2, 3), v) << id;  // counterfactual replays (synth/counterfactual.h)
+    EXPECT_EQ(held_out_at_random(mirrored_id(id + "-cf11"), 0.2, 3), v) << id;
   }
   EXPECT_GT(held, 20);  // the hold-out is real, so agreement above is not trivial
   EXPECT_LT(held, 60);

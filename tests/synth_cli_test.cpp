@@ -65,6 +65,15 @@ TEST(SynthCli, CounterfactualsReplayOnlyTheTrainingDrives) {
     const std::string src = cf.meta(e).extra.at("replay_of");
     EXPECT_NE(std::find(split.train.begin(), split.train.end(), src), split.train.end()) << src;
   }
+  // --without-meta leaves out drives by a metadata key (here the wandering drives of a second run into the source).
+  ASSERT_EQ(test::run_gaia("synth --episodes 3 --first 12 --seconds 1.2 --size 32x64 --seed 3 --wander 1 --out '" +
+                           (dir / "ds").string() + "'").status, 0);
+  auto lk = test::run_gaia("synth counterfactuals '" + (dir / "ds").string() + "' --per-episode 1 --lead 0.4 --hold 0.4 " +
+                           "--seed 3 --without-meta synth_wander --out '" + (dir / "cf-lk").string() + "'");
+  ASSERT_EQ(lk.status, 0) << lk.output;
+  data::Dataset cf_lk(dir / "cf-lk");
+  EXPECT_EQ(cf_lk.size(), split.train.size());
+  for (size_t e = 0; e < cf_lk.size(); ++e) EXPECT_FALSE(cf_lk.meta(e).extra.count("synth_wander"));
   auto same_dir = test::run_gaia("synth counterfactuals '" + (dir / "ds").string() + "' --out '" + (dir / "ds").string() + "'");
   EXPECT_NE(same_dir.status, 0);
   EXPECT_NE(same_dir.output.find("--out must not be the source"), std::string::npos) << same_dir.output;

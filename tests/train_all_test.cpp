@@ -5,6 +5,8 @@
 #include <torch/torch.h>
 
 #include "gaia/core/safetensors.h"
+#include "gaia/data/episode.h"
+#include "gaia/data/geofence.h"
 #include "gaia/world/io.h"
 #include "test_util.h"
 
@@ -22,8 +24,8 @@ int count(const std::string& s, const std::string& what) {
 TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   test::TempDir d;
   const std::string cmd = "train-all --config " + q(test::source_dir() / "configs" / "tiny.yaml") +
-                          " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 3 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"
-                          " --world-steps 4 --decoder-steps 2 --probe-steps 3 --dynamics-probe-steps 3 --skip-eval" +
+                          " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 4 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"
+                          " --world-steps 4 --world-cf-steps 2 --decoder-steps 2 --probe-steps 3 --dynamics-probe-steps 3 --skip-eval" +
                           " --ship " + q(d / "models") + " --out " + q(d / "runs");
   auto r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
@@ -37,23 +39,41 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
     EXPECT_EQ(f32, 0) << f;
   }
   auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
-  ASSERT_EQ(log.size(), 12u + 5u);  // 12 training stages + 5 ship copies
+  ASSERT_EQ(log.size(), 15u + 5u);  // 15 training stages + 5 ship copies
   EXPECT_NE(log[5]["command"].get<std::string>().find("--decoder-only"), std::string::npos);  // tokenizer-refine
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.token_blocks=2"), std::string::npos);
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.ema_decay=0.999"), std::string::npos);
   EXPECT_NE(log[6]["command"].get<std::string>().find("tokenizer-refine"), std::string::npos);  // tokens use its codes
   // ... and every drive again in mirror image, held out with its source.
   EXPECT_TRUE(nlohmann::json::parse(read_file(d / "runs" / "tokens" / "dataset.json"))["mirror"].get<bool>());
-  int mirrored = 0, plain = 0;
-  for (auto& e : fs::directory_iterator(d / "runs" / "tokens" / "episodes"))
-    (e.path().filename().string().find("-mirror") != std::string::npos ? mirrored : plain)++;
-  EXPECT_EQ(plain, 6);
-  EXPECT_EQ(mirrored, 6);
+  // The tokens also hold 6 counterfactual replays of each lane-keeping training drive (docs/synth.md), in mirror
+  // image too, every one of them a training episode like its source.
+  data::Dataset synth(d / "runs" / "synth");
+  const data::Split split = data::load_or_default_split(synth, 0.1, 0);
+  size_t lane_keeping_train = 0;
+  for (size_t e : data::episode_indices(synth, split.train)) lane_keeping_train += !synth.meta(e).extra.count("synth_wander");
+  ASSERT_GT(lane_keeping_train, 0u);
+  int mirrored = 0, plain = 0, replays = 0;
+  for (auto& e : fs::directory_iterator(d / "runs" / "tokens" / "episodes")) {
+    const std::string id = e.path().filename().string();
+    (id.find("-mirror") != std::string::npos ? mirrored : plain)++;
+    if (id.find("-cf") != std::string::npos) {
+      ++replays;
+      EXPECT_FALSE(data::held_out_at_random(id, 0.1, 0)) << id;
+    }
+  }
+  EXPECT_EQ(replays, static_cast<int>(2 * 6 * lane_keeping_train));
+  EXPECT_EQ(plain, 6 + replays / 2);
+  EXPECT_EQ(mirrored, 6 + replays / 2);
   EXPECT_NE(log[7]["command"].get<std::string>().find("world train"), std::string::npos);
   EXPECT_NE(log[7]["command"].get<std::string>().find("--steps 4"), std::string::npos);
-  // The shipped world model is the calibrated one, fitted on the lane-keeping drives.
-  EXPECT_NE(log[8]["command"].get<std::string>().find("world calibrate"), std::string::npos);
-  EXPECT_NE(log[8]["command"].get<std::string>().find("--without-meta synth_wander"), std::string::npos);
+  EXPECT_NE(log[8]["command"].get<std::string>().find("synth counterfactuals"), std::string::npos);
+  EXPECT_NE(log[10]["command"].get<std::string>().find("--init"), std::string::npos);  // world-cf: the fine-tune
+  EXPECT_NE(log[10]["command"].get<std::string>().find("--steps 2"), std::string::npos);
+  // The shipped world model is the calibrated fine-tune, fitted on the lane-keeping drives (not on their replays).
+  EXPECT_NE(log[11]["command"].get<std::string>().find("world calibrate"), std::string::npos);
+  EXPECT_NE(log[11]["command"].get<std::string>().find("world-cf"), std::string::npos);
+  EXPECT_NE(log[11]["command"].get<std::string>().find("--without-meta synth_wander --without-meta replay_of"), std::string::npos);
   world::WorldInfo shipped;
   world::load_world(d / "models" / "world.safetensors", torch::kCPU, &shipped);
   EXPECT_NE(shipped.config.world.copy_bias, 0.0);
@@ -70,7 +90,7 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   // Again: nothing left to do.
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 17) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 20) << r.output;
   // A bad config key fails before any stage starts, naming the key.
   r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);

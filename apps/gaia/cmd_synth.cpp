@@ -103,6 +103,10 @@ void register_synth(CLI::App& app) {
   cfc->add_option("--hold", co->hold_seconds, "seconds the command is held");
   cfc->add_option("--max-curvature", co->max_curvature, "the command's curvature is uniform in [-max, max], 1/m");
   cfc->add_option("--min-speed", co->min_speed, "the command keeps the recorded speed, at least this, m/s");
+  auto without = std::make_shared<std::vector<std::string>>();
+  cfc->add_option("--without-meta", *without,
+                  "leave out drives whose metadata has this key, e.g. synth_wander keeps the lane-keeping drives "
+                  "(repeatable)");
   add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)");
   cfc->callback([=] {
     Config c = resolve_config(*cflags);
@@ -113,14 +117,22 @@ void register_synth(CLI::App& app) {
     data::Dataset ds(*source);
     // Held-out drives are never replayed: their prompts are what gaia eval and validation measure.
     const data::Split split = data::load_or_default_split(ds, 0.1, c.run.seed);
+    std::vector<std::string> ids;
+    for (size_t e : data::episode_indices(ds, split.train)) {
+      bool keep = true;
+      for (const auto& key : *without) keep = keep && !ds.meta(e).extra.count(key);
+      if (keep) ids.push_back(ds.ids()[e]);
+    }
+    if (ids.empty()) fail("{}: no training drive to replay{}", *source, without->empty() ? "" : " without " + fmt::format("{}", fmt::join(*without, ", ")));
     synth::CounterfactualOptions opt = *co;
     opt.seed = c.run.seed;
-    ProgressBar bar(static_cast<int64_t>(split.train.size()) * opt.per_episode, "counterfactuals");
-    const int64_t n = synth::write_counterfactuals(ds, split.train, opt, cflags->out,
-                                                   [&](int64_t done, int64_t) { bar.update(done); });
+    ProgressBar bar(static_cast<int64_t>(ids.size()) * opt.per_episode, "counterfactuals");
+    const int64_t n = synth::write_counterfactuals(ds, ids, opt, cflags->out, [&](int64_t done, int64_t) { bar.update(done); });
     bar.finish();
-    std::printf("wrote %lld replays of %zu training drives (%zu held out, not replayed) -> %s\n", (long long)n,
-                split.train.size(), split.held_out().size(), cflags->out.c_str());
+    if (!fs::exists(fs::path(cflags->out) / "dataset.json"))
+      fail("{}: no training drive is {} s long (--lead + --hold), nothing to replay", *source, opt.lead_seconds + opt.hold_seconds);
+    std::printf("wrote %lld replays of %zu training drives (%zu held out, %zu left out by --without-meta) -> %s\n",
+                (long long)n, ids.size(), split.held_out().size(), split.train.size() - ids.size(), cflags->out.c_str());
   });
 }
 

@@ -19,6 +19,7 @@ struct Stage {
   std::string name;
   std::vector<std::string> args;  // after "gaia"
   fs::path done;                  // the stage is finished when this exists
+  bool write_done = false;        // the command leaves no single final file: write `done` when it succeeds
 };
 
 std::string joined(const std::vector<std::string>& a) {
@@ -44,7 +45,7 @@ void register_train_all(CLI::App& app) {
   // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
   // each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
+    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -64,6 +65,8 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--refine-steps", st->refine,
                   "tokenizer decoder-only steps with refinement and token blocks added (0 = no such stage)");
   cmd->add_option("--world-steps", st->world, "world model steps");
+  cmd->add_option("--world-cf-steps", st->world_cf,
+                  "world model fine-tune steps with counterfactual replays added (0 = no such stage; docs/synth.md)");
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
   cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
@@ -82,7 +85,8 @@ void register_train_all(CLI::App& app) {
     };
     const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
     const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
-    const std::string tokens = (out / "tokens").string(), trained = (out / "world" / "world.safetensors").string();
+    const std::string tokens = (out / "tokens").string();
+    const std::string trained = (st->world_cf > 0 ? out / "world-cf" : out / "world") / "world.safetensors";
     const std::string world = (out / "world-calibrated" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
@@ -97,7 +101,7 @@ void register_train_all(CLI::App& app) {
     std::vector<Stage> stages = {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
-         out / "synth" / ".complete"},
+         out / "synth" / ".complete", true},
         {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
                             "--out", (out / "tokenizer").string()}),
          out / "tokenizer" / "tokenizer.safetensors"},
@@ -111,7 +115,9 @@ void register_train_all(CLI::App& app) {
         // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
         // then copy like real video (MODEL_CARD.md, "Copy calibration").
         {"world-calibrate",
-         with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--out", world}), world},
+         with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--without-meta",
+               "replay_of", "--out", world}),
+         world},
         {"decoder",
          with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
                (out / "decoder").string()}),
@@ -137,6 +143,24 @@ void register_train_all(CLI::App& app) {
                                 {"--decoder-only", "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.token_blocks=2",
                                  "--set", "tokenizer.ema_decay=0.999"}),
                      tok});
+    // Counterfactual replays of the lane-keeping training drives under held random steering commands, added to the
+    // tokens after the world model's first phase, which then fine-tunes on both (MODEL_CARD.md, "World model").
+    if (st->world_cf > 0) {
+      const std::string cf = (out / "synth-cf").string(), first = (out / "world" / "world.safetensors").string();
+      const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
+      stages.insert(at, {{"data-counterfactuals",
+                          with({"synth", "counterfactuals", synth, "--without-meta", "synth_wander", "--per-episode", "6",
+                                "--lead", "1.5", "--hold", "2", "--max-curvature", "0.045", "--out", cf}),
+                          out / "synth-cf" / ".complete", true},
+                         {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
+                          out / "tokens" / ".complete-cf", true},
+                         {"world-cf",
+                          with({"world", "train", tokens, "--init", first, "--steps", std::to_string(st->world_cf),
+                                "--set", "world.lr=3e-4", "--set", "world.warmup_steps=50", "--set", "world.p_action=0.6",
+                                "--set", "world.p_text=0.25", "--set", "world.p_uncond=0.15", "--out",
+                                (out / "world-cf").string()}),
+                          trained}});
+    }
     std::vector<Stage> more_drives;
     auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
       if (n == 0) return;
@@ -144,7 +168,7 @@ void register_train_all(CLI::App& app) {
                                  "--seconds", fmt::format("{}", *seconds), "--seed", "1"};
       a.insert(a.end(), driver.begin(), driver.end());
       a.insert(a.end(), {"--out", synth});
-      more_drives.push_back({"data-" + kind, with(a), out / "synth" / (".complete-" + kind)});
+      more_drives.push_back({"data-" + kind, with(a), out / "synth" / (".complete-" + kind), true});
     };
     drives("wander", *wander_episodes, *episodes, {"--wander", fmt::format("{}", *wander)});
     drives("swerve", *swerve_episodes, *episodes + *wander_episodes,
@@ -192,7 +216,7 @@ void register_train_all(CLI::App& app) {
       const int rc = run_gaia_child(s.args);
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (rc != 0) fail("train-all: stage '{}' failed (exit {}); fix it and run the same command again to resume", s.name, rc);
-      if (s.name.rfind("data", 0) == 0) write_file_atomic(s.done, "");  // gaia synth has no single final file
+      if (s.write_done) write_file_atomic(s.done, "");
       std::printf("[%zu/%zu] %s: finished in %.1f min\n", i + 1, stages.size(), s.name.c_str(), secs / 60);
       log.push_back({{"stage", s.name}, {"command", line}, {"seconds", secs}});
       write_file_atomic(out / "train-all.json", log.dump(2) + "\n");

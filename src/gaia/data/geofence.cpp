@@ -1,6 +1,8 @@
 #include "gaia/data/geofence.h"
 
 #include <algorithm>
+#include <cctype>
+#include <cstring>
 #include <random>
 
 #include "gaia/core/error.h"
@@ -70,9 +72,19 @@ Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, doubl
 
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {
   uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
-  for (unsigned char c : mirror_source_id(id)) h = (h ^ c) * 1099511628211ull;  // a mirror image goes with its source
+  for (unsigned char c : split_source_id(id)) h = (h ^ c) * 1099511628211ull;  // a derived episode goes with its source
   std::mt19937_64 rng(seed ^ h);
   return std::uniform_real_distribution<double>(0, 1)(rng) < frac;
+}
+
+std::string split_source_id(const std::string& id) {
+  std::string s = mirror_source_id(id);
+  const size_t at = s.rfind(kCounterfactualInfix);
+  const size_t digits = at == std::string::npos ? 0 : s.size() - at - std::strlen(kCounterfactualInfix);
+  if (at == std::string::npos || at == 0 || digits == 0) return s;
+  for (size_t i = s.size() - digits; i < s.size(); ++i)
+    if (!std::isdigit(static_cast<unsigned char>(s[i]))) return s;
+  return s.substr(0, at);
 }
 
 Split read_split(const fs::path& f) {

@@ -32,8 +32,15 @@ struct Split {
 Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
 
 // The random hold-out decision for one episode: a hash of (seed, id), so it does not change when episodes are added.
-// A mirrored episode (data/mirror.h) hashes its source's id: it is held out exactly when its source is.
+// An episode derived from another hashes its source's id (split_source_id): it is held out exactly when its source
+// is, so a validation drive never reaches training in another form.
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed);
+
+// Counterfactual replays of a drive are `<source id>-cf<k>` (synth/counterfactual.h).
+inline constexpr const char* kCounterfactualInfix = "-cf";
+// The drive an episode derives from: "e1-mirror" -> "e1" (data/mirror.h), "e1-cf03" and "e1-cf03-mirror" -> "e1";
+// any other id unchanged.
+std::string split_source_id(const std::string& id);
 
 Split read_split(const fs::path& file);  // a split.json; errors name the file
 

@@ -12,7 +12,9 @@
 
 namespace gaia::synth {
 
-std::string counterfactual_id(const std::string& source_id, int k) { return fmt::format("{}-cf{:02d}", source_id, k); }
+std::string counterfactual_id(const std::string& source_id, int k) {
+  return fmt::format("{}{}{:02d}", source_id, data::kCounterfactualInfix, k);
+}
 
 int64_t write_counterfactuals(const data::Dataset& ds, const std::vector<std::string>& ids,
                               const CounterfactualOptions& opt, const fs::path& out,

@@ -27,7 +27,8 @@ struct CounterfactualOptions {
   uint64_t seed = 0;
 };
 
-// Id of replay k of episode `source_id`: "<source_id>-cf<k, 2 digits>".
+// Id of replay k of episode `source_id`: "<source_id>-cf<k, 2 digits>"; data::split_source_id maps it back, so the
+// replay is held out exactly when its source is.
 std::string counterfactual_id(const std::string& source_id, int k);
 
 // Writes opt.per_episode replays of each episode of `ids` into `out` and returns how many it wrote. Replays
