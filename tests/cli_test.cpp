@@ -113,12 +113,28 @@ TEST(Cli, ConvertToHalf) {
   auto src = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
   auto r = test::run_gaia("convert '" + src.string() + "' --out '" + (d / "x.safetensors").string() + "'");
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("say --half, --set KEY=VALUE or both"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("say --half, --set KEY=VALUE, --interpolate-from FROM or a combination"), std::string::npos) << r.output;
   r = test::run_gaia("convert '" + src.string() + "' --half --out '" + (d / "half.safetensors").string() + "'");
   ASSERT_EQ(r.status, 0) << r.output;
   // The output path is used exactly as given (a CLI11 required-flag bug once corrupted it).
   EXPECT_TRUE(fs::exists(d / "half.safetensors")) << r.output;
   EXPECT_LT(fs::file_size(d / "half.safetensors"), fs::file_size(src));
+  // Interpolated halfway between the file and its own half copy, and stored in half again: within half rounding.
+  r = test::run_gaia("convert '" + src.string() + "' --interpolate-from '" + (d / "half.safetensors").string() +
+                     "' --alpha 0.5 --half --out '" + (d / "mix.safetensors").string() + "'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile f32(src), mix(d / "mix.safetensors");
+  for (const auto& n : f32.names()) {
+    if (f32.get(n).dtype != DType::F32) continue;
+    EXPECT_EQ(mix.get(n).dtype, DType::F16) << n;
+    const auto a = f32.to_float(n), m = mix.to_float(n);
+    for (size_t k = 0; k < a.size(); ++k) ASSERT_NEAR(m[k], a[k], 2e-3 * std::abs(a[k]) + 1e-4) << n;
+  }
+  r = test::run_gaia("convert '" + src.string() + "' --interpolate-from '" + (d / "half.safetensors").string() +
+                     "' --alpha 1.5 --out '" + (d / "bad.safetensors").string() + "'");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--alpha must be in [0, 1]"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "bad.safetensors"));
 }
 
 // convert --set changes one sampling setting in the stored config and nothing else: the tensors are the same bytes,

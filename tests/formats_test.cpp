@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/interpolate.h"
 #include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
@@ -224,4 +225,45 @@ TEST(Safetensors, ConvertToHalfKeepsNamesMetadataAndOtherDtypes) {
   EXPECT_NE(test::error_of([&] { convert_to_half(d / "b.safetensors", d / "b.safetensors"); }).find("nan_here"),
             std::string::npos);
   EXPECT_EQ(SafetensorsFile(d / "b.safetensors").get("nan_here").dtype, DType::F32);
+}
+
+// WiSE-FT interpolation: every float tensor on the straight line between the two files (F16 read back to float),
+// other dtypes and the metadata from the fine-tuned file; mismatched tensor sets or shapes name the tensor, and the
+// output is not written.
+TEST(Safetensors, InterpolationLiesOnTheLineBetweenTwoTrainings) {
+  test::TempDir d;
+  SafetensorsWriter a, b;
+  std::vector<int64_t> i{7, 8};
+  a.add_f32("w", {2, 2}, {0, 1, -2, 4});
+  b.add_f32("w", {2, 2}, {2, 1, 2, -4});
+  std::vector<uint16_t> ha{float_to_half(1.0f)}, hb{float_to_half(3.0f)};
+  a.add("h", DType::F16, {1}, ha.data(), 2);
+  b.add("h", DType::F16, {1}, hb.data(), 2);
+  a.add("ids", DType::I64, {2}, i.data(), 16);
+  b.add("ids", DType::I64, {2}, i.data(), 16);
+  a.set_metadata("gaia.component", "before");
+  b.set_metadata("gaia.component", "after");
+  a.write(d / "a.safetensors");
+  b.write(d / "b.safetensors");
+  interpolate_weights(d / "a.safetensors", d / "b.safetensors", 0.25, d / "m.safetensors");
+  SafetensorsFile m(d / "m.safetensors");
+  EXPECT_EQ(m.to_float("w"), (std::vector<float>{0.5f, 1, -1, 2}));
+  EXPECT_EQ(m.to_float("h"), (std::vector<float>{1.5f}));
+  EXPECT_EQ(m.get("ids").dtype, DType::I64);
+  EXPECT_EQ(m.metadata().at("gaia.component"), "after");
+  interpolate_weights(d / "a.safetensors", d / "b.safetensors", 0, d / "zero.safetensors");
+  EXPECT_EQ(SafetensorsFile(d / "zero.safetensors").to_float("w"), (std::vector<float>{0, 1, -2, 4}));
+  SafetensorsWriter c;
+  c.add_f32("w", {4}, {0, 1, 2, 3});
+  c.write(d / "c.safetensors");
+  EXPECT_NE(error_of([&] { interpolate_weights(d / "c.safetensors", d / "b.safetensors", 0.5, d / "x.safetensors"); })
+                .find("'h'"),
+            std::string::npos);
+  c.add_f32("h", {1}, {0});
+  c.add("ids", DType::I64, {2}, i.data(), 16);
+  c.write(d / "c.safetensors");
+  EXPECT_NE(error_of([&] { interpolate_weights(d / "c.safetensors", d / "b.safetensors", 0.5, d / "x.safetensors"); })
+                .find("tensor 'w' has another shape"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(d / "x.safetensors"));
 }

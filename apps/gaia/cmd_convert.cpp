@@ -1,10 +1,12 @@
 // gaia convert: re-store a weights file (tokenizer, world model, decoder, probe) with F32 tensors as F16, and/or with
-// a sampling setting of its stored config changed (e.g. the temperature the world model is shipped to sample at).
+// a sampling setting of its stored config changed (e.g. the temperature the world model is shipped to sample at),
+// and/or interpolated towards the weights it was fine-tuned from (core/interpolate.h).
 #include <algorithm>
 #include <cstdio>
 
 #include "common.h"
 #include "gaia/core/error.h"
+#include "gaia/core/interpolate.h"
 #include "gaia/core/safetensors.h"
 
 namespace gaia::app {
@@ -22,9 +24,19 @@ void register_convert(CLI::App& app) {
                   "KEY=VALUE: change a sampling setting in the file's stored config (the default of every command "
                   "that loads it), e.g. world.temperature=0.9; repeatable")
       ->take_all();
+  auto from = std::make_shared<std::string>();
+  auto alpha = std::make_shared<double>(0.5);
+  cmd->add_option("--interpolate-from", *from,
+                  "weights WEIGHTS was fine-tuned from: write FROM + alpha (WEIGHTS - FROM) instead (WiSE-FT; keeps "
+                  "more of what the fine-tune cost, MODEL_CARD.md)");
+  cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS");
   cmd->add_option("--out", *out, "output file (may be WEIGHTS itself)")->required();
   cmd->callback([=] {
-    if (!*half && sets->empty()) fail("gaia convert: say --half, --set KEY=VALUE or both");
+    if (!*half && sets->empty() && from->empty())
+      fail("gaia convert: say --half, --set KEY=VALUE, --interpolate-from FROM or a combination");
+    if (!from->empty() && !(*alpha >= 0 && *alpha <= 1)) fail("--alpha must be in [0, 1], got {}", *alpha);
+    // Every check before anything is written. The interpolated weights carry WEIGHTS' metadata, so its config is
+    // the one --set changes.
     std::map<std::string, std::string> metadata;
     if (!sets->empty()) {
       std::string yaml;
@@ -47,8 +59,15 @@ void register_convert(CLI::App& app) {
       }
       metadata["gaia.config"] = yaml;
     }
-    const double err = rewrite_weights(*in, *out, *half, metadata);
-    if (*half) std::printf("%s -> %s (F16; largest rounding error %.3g)\n", in->c_str(), out->c_str(), err);
+    std::string src = *in;
+    if (!from->empty()) {
+      interpolate_weights(*from, *in, *alpha, *out);
+      std::printf("%s: %s + %.3g (%s - %s)\n", out->c_str(), from->c_str(), *alpha, in->c_str(), from->c_str());
+      if (!*half && sets->empty()) return;
+      src = *out;  // the rest rewrites the interpolated weights in place
+    }
+    const double err = rewrite_weights(src, *out, *half, metadata);
+    if (*half) std::printf("%s -> %s (F16; largest rounding error %.3g)\n", src.c_str(), out->c_str(), err);
     for (const auto& kv : *sets) std::printf("%s: %s\n", out->c_str(), kv.c_str());
   });
 }
