@@ -58,6 +58,11 @@ TEST(Config, UnknownKeysAndBadValuesNameTheKey) {
   EXPECT_THROW(k.set("world.guide_actions_within_top_k=maybe"), Error);
   k.set("world.top_k=0");
   EXPECT_NE(test::error_of([&] { k.validate(); }).find("world.top_k"), std::string::npos);
+  Config r;
+  r.set("world.p_action_replay=0.9");
+  EXPECT_NO_THROW(r.validate());
+  r.set("world.p_action_replay=1.5");
+  EXPECT_NE(test::error_of([&] { r.validate(); }).find("world.p_action_replay"), std::string::npos);
 }
 
 TEST(Plan, PaperConfigMatchesThePaper) {

@@ -4,6 +4,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -56,6 +57,7 @@ struct EpisodeSpec {
   int offset = 0;
   // speed (m/s) and curvature (1/m) of step t
   std::function<std::pair<float, float>(int64_t)> action = [](int64_t t) { return std::make_pair(float(t), 0.0f); };
+  std::map<std::string, std::string> extra = {};  // metadata, e.g. replay_of
 };
 
 // One token episode in the layout `gaia tokenize` writes (docs/formats.md, "Token dataset").
@@ -84,6 +86,7 @@ void write_episode(const fs::path& root, const EpisodeSpec& s) {
   m.time_of_day = "day";
   m.latitude = 51.5;
   m.longitude = -0.1;
+  m.extra = s.extra;
   json j = m.to_json();
   j["steps"] = s.steps;
   write_file_atomic(dir / "episode.json", j.dump(2));
@@ -359,6 +362,49 @@ TEST(WorldData, ConditioningModesFollowTheMix) {
   ConditioningMix only_text{0, 0, 1};
   for (int i = 0; i < 100; ++i) EXPECT_EQ(only_text.draw(rng), Conditioning::kText);
   EXPECT_NE(test::error_of([&] { ConditioningMix{0, 0, 0}.draw(rng); }).find("p_uncond"), std::string::npos);
+}
+
+TEST(WorldData, CounterfactualReplaysDrawTheirOwnActionShare) {
+  test::TempDir dir;
+  fs::path root = dir / "tokens";
+  write_header(root);
+  write_episode(root, EpisodeSpec{"e0", 8, "clear", 0});
+  EpisodeSpec r{"e0-cf00", 8, "clear", 3};
+  r.extra = {{data::kReplayOfKey, "e0"}};
+  write_episode(root, r);
+  TokenDataset ds(root);
+  ASSERT_FALSE(ds.meta(0).is_replay());
+  ASSERT_TRUE(ds.meta(1).is_replay());
+  Vocab v = world::build_vocab(ds, {0}, 32);
+  const int64_t n = 6000;
+  auto shares = [&](size_t episode, const ConditioningMix& mix, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    WorldBatch b = ds.make_batch(std::vector<Window>(n, Window{episode, 0, 4}), &v, 2, mix, rng);
+    EXPECT_EQ((b.use_action & b.use_text).sum().item<int64_t>(), 0);
+    double a = b.use_action.sum().item<int64_t>() / double(n), t = b.use_text.sum().item<int64_t>() / double(n);
+    return std::make_tuple(1 - a - t, a, t, b);
+  };
+  ConditioningMix mix{0.2, 0.4, 0.4, 0.8};
+  // A replay: 80% action, the other 20% split 1 : 2 as p_uncond : p_text (5% / 15%). Binomial sd <= 0.0065.
+  auto [u1, a1, t1, b1] = shares(1, mix, 5);
+  EXPECT_NEAR(a1, 0.8, 0.025);
+  EXPECT_NEAR(u1, 0.05, 0.02);
+  EXPECT_NEAR(t1, 0.15, 0.02);
+  // Any other episode keeps the paper's 20 / 40 / 40, with exactly the draws it had before replays had a mix.
+  auto [u0, a0, t0, b0] = shares(0, mix, 5);
+  EXPECT_NEAR(a0, 0.4, 0.025);
+  EXPECT_NEAR(u0, 0.2, 0.025);
+  auto [uu, au, tu, bu] = shares(0, ConditioningMix{0.2, 0.4, 0.4}, 5);
+  EXPECT_TRUE(same(b0.use_action, bu.use_action) && same(b0.use_text, bu.use_text));
+  // -1: a replay draws like every other window.
+  auto [ur, ar, tr, br] = shares(1, ConditioningMix{0.2, 0.4, 0.4, -1}, 5);
+  EXPECT_TRUE(same(br.use_action, bu.use_action) && same(br.use_text, bu.use_text));
+  // All action, and a mix with no text or unconditional share left.
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 50; ++i) EXPECT_EQ((ConditioningMix{0.2, 0.4, 0.4, 1}.draw(rng, true)), Conditioning::kAction);
+  for (int i = 0; i < 50; ++i) EXPECT_EQ((ConditioningMix{0, 1, 0, 0.3}.draw(rng, true)), Conditioning::kAction);
+  EXPECT_NE(test::error_of([&] { ConditioningMix{0.2, 0.4, 0.4, 1.5}.draw(rng, true); }).find("p_action_replay"),
+            std::string::npos);
 }
 
 TEST(WorldData, BalancingChangesTheDistributionAsTheBalancerSays) {

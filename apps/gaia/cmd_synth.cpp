@@ -118,11 +118,8 @@ void register_synth(CLI::App& app) {
     // Held-out drives are never replayed: their prompts are what gaia eval and validation measure.
     const data::Split split = data::load_or_default_split(ds, 0.1, c.run.seed);
     std::vector<std::string> ids;
-    for (size_t e : data::episode_indices(ds, split.train)) {
-      bool keep = true;
-      for (const auto& key : *without) keep = keep && !ds.meta(e).extra.count(key);
-      if (keep) ids.push_back(ds.ids()[e]);
-    }
+    for (size_t e : data::episode_indices(ds, split.train))
+      if (!ds.meta(e).has_any_extra(*without)) ids.push_back(ds.ids()[e]);
     if (ids.empty()) fail("{}: no training drive to replay{}", *source, without->empty() ? "" : " without " + fmt::format("{}", fmt::join(*without, ", ")));
     synth::CounterfactualOptions opt = *co;
     opt.seed = c.run.seed;

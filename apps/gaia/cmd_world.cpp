@@ -238,11 +238,8 @@ void register_world(CLI::App& app) {
       auto ids = ds.split(0.1, info.config.run.seed).train;
       if (ids.empty()) ids = ds.ids();
       std::vector<size_t> eps;
-      for (size_t e : ds.indices(ids)) {
-        bool keep = true;
-        for (const auto& key : *without) keep = keep && !ds.meta(e).extra.count(key);
-        if (keep) eps.push_back(e);
-      }
+      for (size_t e : ds.indices(ids))
+        if (!ds.meta(e).has_any_extra(*without)) eps.push_back(e);
       auto windows = world::validation_windows(ds, eps, info.config.world.context_steps, *max_windows);
       if (windows.empty())
         fail("{}: no training window of {} steps{}", *tokens, info.config.world.context_steps,

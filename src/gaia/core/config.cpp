@@ -116,6 +116,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("world.p_uncond", &w.p_uncond));
   f.push_back(field("world.p_action", &w.p_action));
   f.push_back(field("world.p_text", &w.p_text));
+  f.push_back(field("world.p_action_replay", &w.p_action_replay));
   f.push_back(field("world.lr", &w.lr));
   f.push_back(field("world.weight_decay", &w.weight_decay));
   f.push_back(field("world.beta1", &w.beta1));
@@ -244,6 +245,8 @@ void Config::validate() const {
   need(world.context_steps >= 1 && world.text_tokens >= 1, "world.context_steps >= 1 and world.text_tokens >= 1");
   double p = world.p_uncond + world.p_action + world.p_text;
   need(p > 0.999 && p < 1.001, "world.p_uncond + p_action + p_text must be 1");
+  need(world.p_action_replay == -1 || (world.p_action_replay >= 0 && world.p_action_replay <= 1),
+       "world.p_action_replay must be in [0, 1], or -1 for the same mix as every other window");
   need(world.top_k >= 1, "world.top_k must be >= 1");
   need(world.temperature > 0, "world.temperature must be > 0");
   need(data.balance_exponent >= 0 && data.balance_exponent <= 1, "data.balance_exponent must be in [0, 1]");

@@ -29,6 +29,9 @@ namespace gaia::data {
 
 constexpr int kEpisodeSchemaVersion = 1;
 
+// Metadata key of a counterfactual replay (`gaia synth counterfactuals`): the id of the drive it replays.
+inline constexpr const char* kReplayOfKey = "replay_of";
+
 struct EpisodeMeta {
   std::string id;                 // directory name; [A-Za-z0-9_.-]
   double fps = 25.0;              // native frame rate (paper §3: 25 Hz)
@@ -45,6 +48,13 @@ struct EpisodeMeta {
   nlohmann::json to_json() const;
   static EpisodeMeta from_json(const nlohmann::json& j, const std::string& where);
   bool has_location() const { return latitude == latitude && longitude == longitude; }
+  // Whether `extra` holds any of `keys` (the --without-meta filters of calibration and counterfactual replays).
+  bool has_any_extra(const std::vector<std::string>& keys) const {
+    for (const auto& k : keys)
+      if (extra.count(k)) return true;
+    return false;
+  }
+  bool is_replay() const { return extra.count(kReplayOfKey) > 0; }
 };
 
 // Per-frame record handed to the writer. Frames are BGR CV_8UC3 (OpenCV's convention) of the episode's size.

@@ -143,8 +143,8 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
     o.swerve = parse_double(w->second, where.string() + ": synth_swerve");
   o.overwrite = overwrite;
   // A replay starts mid-drive, so its recorded actions cannot rebuild the world from the start: replay its source.
-  if (m.extra.count("replay_of"))
-    fail("{}: is itself a replay (of {}); replay that episode instead", where.string(), m.extra.at("replay_of"));
+  if (m.is_replay())
+    fail("{}: is itself a replay (of {}); replay that episode instead", where.string(), m.extra.at(data::kReplayOfKey));
   if (from < 0 || from > original.size())
     fail("{}: replay start frame {} is outside [0, {}]", where.string(), from, original.size());
   if (actions.empty()) fail("replay of {}: no actions given", m.id);
@@ -162,7 +162,7 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
   data::EpisodeMeta meta = sim.meta();
   meta.id = out_id;
   meta.source = m.source + fmt::format(",replay_from={}", from);
-  meta.extra["replay_of"] = m.id;
+  meta.extra[data::kReplayOfKey] = m.id;
   meta.extra["replay_from"] = std::to_string(from);
   data::EpisodeWriter writer(out_dataset, meta, overwrite);
   for (const ActionStep& a0 : actions) {

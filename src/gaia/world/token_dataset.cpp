@@ -50,10 +50,17 @@ std::vector<int32_t> token_ids(const NpyArray& a, const fs::path& file) {
 
 }  // namespace
 
-Conditioning ConditioningMix::draw(std::mt19937_64& rng) const {
+Conditioning ConditioningMix::draw(std::mt19937_64& rng, bool replay) const {
   const double total = p_uncond + p_action + p_text;
   if (!(p_uncond >= 0 && p_action >= 0 && p_text >= 0 && total > 0))
     fail("world.p_uncond / p_action / p_text must be >= 0 with a positive sum, got {} / {} / {}", p_uncond, p_action, p_text);
+  if (replay && p_action_replay >= 0) {
+    if (p_action_replay > 1) fail("world.p_action_replay must be in [0, 1], got {}", p_action_replay);
+    const double u = std::uniform_real_distribution<double>(0, 1)(rng), rest = p_uncond + p_text;
+    if (u < p_action_replay || rest <= 0) return Conditioning::kAction;
+    return (u - p_action_replay) < (1 - p_action_replay) * p_uncond / rest ? Conditioning::kUnconditional
+                                                                           : Conditioning::kText;
+  }
   double u = std::uniform_real_distribution<double>(0, total)(rng);
   if (u < p_uncond) return Conditioning::kUnconditional;
   if (u < p_uncond + p_action) return Conditioning::kAction;
@@ -267,7 +274,7 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const te
         auto ids = vocab->encode(ep->captions[static_cast<size_t>(w.start + t)], m);
         std::copy(ids.begin(), ids.end(), text_ids.data_ptr<int64_t>() + (b * T + t) * m);
       }
-    Conditioning c = mix.draw(rng);
+    Conditioning c = mix.draw(rng, meta(w.episode).is_replay());
     ua[b] = c == Conditioning::kAction;
     ut[b] = c == Conditioning::kText;
   }

@@ -44,8 +44,11 @@ enum class Conditioning { kUnconditional, kAction, kText };
 
 struct ConditioningMix {
   double p_uncond = 0.2, p_action = 0.4, p_text = 0.4;  // paper §4.2: 20% / 40% / 40%
-  static ConditioningMix from(const WorldConfig& c) { return {c.p_uncond, c.p_action, c.p_text}; }
-  Conditioning draw(std::mt19937_64& rng) const;  // one uniform draw; fails unless the p's are >= 0 with sum > 0
+  double p_action_replay = -1;  // action share on counterfactual replays (world.p_action_replay); -1 = as above
+  static ConditioningMix from(const WorldConfig& c) { return {c.p_uncond, c.p_action, c.p_text, c.p_action_replay}; }
+  // One uniform draw; fails unless the p's are >= 0 with sum > 0. For a window of a replay (`replay`) with
+  // p_action_replay >= 0: action with that probability, else unconditional or text in the ratio p_uncond : p_text.
+  Conditioning draw(std::mt19937_64& rng, bool replay = false) const;
 };
 
 // What is loaded on demand for one episode.
@@ -92,7 +95,8 @@ class TokenDataset {
 
   // The batch of these windows (all of the same length T): tokens [B,T,n] int64, actions [B,T,2] float32 divided
   // by kSpeedScale / kCurvatureScale (NaN kept), text_ids [B,T,m] via `vocab` (undefined without vocab or
-  // captions), and one conditioning mode per example drawn from `mix` with `rng` (use_action / use_text).
+  // captions), and one conditioning mode per example drawn from `mix` with `rng` (use_action / use_text; windows of
+  // counterfactual replays draw with ConditioningMix::p_action_replay).
   WorldBatch make_batch(const std::vector<Window>& windows, const text::Vocab* vocab, int64_t m,
                         const ConditioningMix& mix, std::mt19937_64& rng) const;
 
