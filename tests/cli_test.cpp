@@ -135,6 +135,11 @@ TEST(Cli, ConvertToHalf) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--alpha must be in [0, 1]"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "bad.safetensors"));
+  // --alpha alone would be ignored: refused.
+  r = test::run_gaia("convert '" + src.string() + "' --half --alpha 0.5 --out '" + (d / "bad.safetensors").string() + "'");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--alpha needs --interpolate-from"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "bad.safetensors"));
 }
 
 // convert --set changes one sampling setting in the stored config and nothing else: the tensors are the same bytes,

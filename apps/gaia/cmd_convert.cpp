@@ -29,11 +29,12 @@ void register_convert(CLI::App& app) {
   cmd->add_option("--interpolate-from", *from,
                   "weights WEIGHTS was fine-tuned from: write FROM + alpha (WEIGHTS - FROM) instead (WiSE-FT; keeps "
                   "more of what the fine-tune cost, MODEL_CARD.md)");
-  cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS");
+  auto* alpha_opt = cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS");
   cmd->add_option("--out", *out, "output file (may be WEIGHTS itself)")->required();
   cmd->callback([=] {
     if (!*half && sets->empty() && from->empty())
       fail("gaia convert: say --half, --set KEY=VALUE, --interpolate-from FROM or a combination");
+    if (from->empty() && alpha_opt->count()) fail("gaia convert: --alpha needs --interpolate-from FROM");
     if (!from->empty() && !(*alpha >= 0 && *alpha <= 1)) fail("--alpha must be in [0, 1], got {}", *alpha);
     // Every check before anything is written. The interpolated weights carry WEIGHTS' metadata, so its config is
     // the one --set changes.
