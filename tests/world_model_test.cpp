@@ -8,6 +8,7 @@
 #include "gaia/plan/plan.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/world/calibrate.h"
+#include "gaia/world/distill.h"
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
 #include "gaia/world/rollout.h"
@@ -165,6 +166,34 @@ TEST(WorldModel, ActionMlpStartsAtTheLinearEmbeddingAndBends) {
   Config bad = tiny();
   bad.world.action_mlp = -1;
   EXPECT_THROW(bad.validate(), std::exception);
+}
+
+// Distillation's KL term against LibTorch's own kl_div, only on the kept examples (their gradient alone is non-zero),
+// 0 between equal logits and with nothing kept; wrong shapes are errors.
+TEST(WorldModel, DistillationKlIsLibTorchsOnTheKeptExamplesOnly) {
+  namespace F = torch::nn::functional;
+  torch::manual_seed(4);
+  auto s = torch::randn({3, 2, 4, 5}, torch::requires_grad()), t = torch::randn({3, 2, 4, 5});
+  auto keep = torch::tensor({true, false, true});
+  auto kl = world::image_token_kl(s, t, keep);
+  auto idx = torch::tensor({0, 2});
+  auto ref = F::kl_div(torch::log_softmax(s.index_select(0, idx), -1).reshape({-1, 5}),
+                       torch::softmax(t.index_select(0, idx), -1).reshape({-1, 5}),
+                       F::KLDivFuncOptions().reduction(torch::kSum)) / (2 * 2 * 4);
+  EXPECT_NEAR(kl.item<double>(), ref.item<double>(), 1e-6);
+  EXPECT_GT(kl.item<double>(), 0.01);
+  kl.backward();
+  EXPECT_EQ(s.grad()[1].abs().max().item<double>(), 0.0);
+  EXPECT_GT(s.grad()[0].abs().max().item<double>(), 0.0);
+  auto t2 = t.clone();
+  t2[1] += 3;  // a dropped example's teacher does not matter
+  EXPECT_NEAR(world::image_token_kl(s, t2, keep).item<double>(), kl.item<double>(), 1e-7);
+  EXPECT_NEAR(world::image_token_kl(t, t, keep).item<double>(), 0.0, 1e-6);
+  auto none = world::image_token_kl(s, t, torch::zeros({3}, torch::kBool));
+  EXPECT_EQ(none.item<double>(), 0.0);
+  none.backward();  // still a graph to step through
+  EXPECT_THROW(world::image_token_kl(s, t.slice(0, 0, 2), keep), Error);
+  EXPECT_THROW(world::image_token_kl(s, t, torch::ones({2}, torch::kBool)), Error);
 }
 
 TEST(WorldSampling, TopKNeverLeavesTheTopK) {

@@ -53,6 +53,10 @@ void register_world(CLI::App& app) {
                     "train only the parameters whose names start with these (comma-separated, e.g. "
                     "speed_mlp,curvature_mlp); the rest stay as --init gave them")
         ->delimiter(',');
+    cmd->add_option("--distill-from", o->distill_from,
+                    "keep the text-conditioned and unconditional predictions of these weights (usually --init's): every "
+                    "example that is not action-conditioned adds a KL term to them (learning without forgetting)");
+    cmd->add_option("--distill-weight", o->distill_weight, "weight of that KL term");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
@@ -67,6 +71,7 @@ void register_world(CLI::App& app) {
           [&](const world::WorldStepLog& l) {
             if (!bar) bar = std::make_unique<ProgressBar>(l.total, "world", true, l.step);  // a resumed run starts mid-way
             std::string info = fmt::format("loss {:.3f} {:.0f} tok/s", l.loss, l.tokens_per_s);
+            if (l.distill >= 0) info += fmt::format(" kl {:.4f}", l.distill);
             if (l.validation && !l.val.empty())
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
             bar->update(l.step, info);

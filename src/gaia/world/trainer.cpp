@@ -10,6 +10,7 @@
 #include "gaia/train/optim.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
+#include "gaia/world/distill.h"
 #include "gaia/world/evaluate.h"
 #include "gaia/world/io.h"
 
@@ -100,6 +101,25 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     note("initialised from " + opt.init.string());
   }
   init = nullptr;
+  // The teacher of distillation: same token grid and codebook, and the same words for the same text ids.
+  WorldModel teacher{nullptr};
+  if (!opt.distill_from.empty()) {
+    if (!(opt.distill_weight > 0 && std::isfinite(opt.distill_weight)))
+      fail("--distill-weight must be a positive number, got {}", opt.distill_weight);
+    WorldInfo ti;
+    teacher = load_world(opt.distill_from, dev, &ti);
+    if (ti.grid_h != ds.grid_h() || ti.grid_w != ds.grid_w() || ti.K != ds.codebook_size())
+      fail("{}: a {}x{} token grid with K = {}, but {} has {}x{} with K = {}", opt.distill_from.string(), ti.grid_h,
+           ti.grid_w, ti.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
+    if (!(ti.vocab == vocab))
+      fail("{}: its text vocabulary differs from this run's (distil from the --init weights, or weights with their "
+           "vocabulary)", opt.distill_from.string());
+    // Its prediction as the run's model would make it: the same copy logit (a calibrated teacher carries its own).
+    teacher->cfg.copy_bias = wc.copy_bias;
+    teacher->eval();
+    for (auto& p : teacher->parameters()) p.set_requires_grad(false);
+    note("distilling text-only and unconditional predictions from " + opt.distill_from.string());
+  }
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
   auto save = [&]() {
@@ -131,8 +151,21 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
     const double lr = sched(step);
     train::set_lr(*optim, lr);
-    auto loss = image_token_loss(model->forward(batch), batch.tokens);
-    const double lv = loss.item<double>();
+    auto logits = model->forward(batch);
+    auto loss = image_token_loss(logits, batch.tokens);
+    const double lv = loss.item<double>();  // logged: the cross-entropy alone, comparable with runs without a teacher
+    double kl = -1;
+    if (teacher) {
+      torch::Tensor tl;
+      {
+        torch::NoGradGuard no_grad;
+        tl = teacher->forward(batch);
+      }
+      auto d = image_token_kl(logits, tl, batch.use_action.logical_not());
+      kl = d.item<double>();
+      if (!std::isfinite(kl)) fail("world model training diverged at step {} (the distillation term is not finite)", step);
+      loss = loss + opt.distill_weight * d;
+    }
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
     optim->zero_grad();
     loss.backward();
@@ -145,6 +178,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     log.lr = lr;
     log.loss = lv;
     log.grad_norm = gn;
+    log.distill = kl;
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (loop.validate_now(step, opt.val_every)) {
@@ -152,8 +186,9 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       log.val = validate();
       result.last_val = log.val;
     }
-    const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
+    nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
                                {"tokens_per_s", log.tokens_per_s}, {"val", log.val}});
+    if (teacher) record["distill"] = kl;
     if (on_step) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }

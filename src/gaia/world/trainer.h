@@ -24,11 +24,17 @@ struct WorldTrainOptions {
   // stay as --init gave them: a fine-tune of the action embedding leaves text-only and unconditional outputs as
   // they were.
   std::vector<std::string> train_only;
+  // Learning without forgetting (world/distill.h): every example that is not action-conditioned adds
+  // distill_weight x KL(these weights' prediction || the model's) per image token, so a fine-tune for action
+  // control keeps the text-conditioned and unconditional predictions that text guidance mixes. Empty = off.
+  fs::path distill_from;
+  double distill_weight = 1.0;
 };
 
 struct WorldStepLog {
   int step = 0, total = 0;
   double lr = 0, loss = 0, grad_norm = 0, tokens_per_s = 0;
+  double distill = -1;        // the KL term (nats per image token) when distilling, else -1
   bool validation = false;
   nlohmann::json val;         // {"action": nats, "text": nats, "uncond": nats, "bits_action": ...}
 };
