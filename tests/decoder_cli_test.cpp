@@ -178,13 +178,7 @@ TEST(DecoderCli, BadInputsAreClearErrors) {
 TEST(DecoderCli, TrainDrawsNoiseLevelsBelowTrainMaxTime) {
   auto& p = DecoderPipeline::get();
   const std::string base = "decoder train " + q(p.ds) + p.tokenizer() + p.tiny() + " --val-every 100 --steps 8";
-  auto times = [](const fs::path& metrics) {
-    std::vector<double> t;
-    std::istringstream in(read_file(metrics));
-    for (std::string line; std::getline(in, line);)
-      if (!line.empty()) t.push_back(nlohmann::json::parse(line).at("t").get<double>());
-    return t;
-  };
+  auto times = [](const fs::path& metrics) { return test::jsonl_numbers(metrics, "t"); };
   auto r = test::run_gaia(base + " --set decoder.train_max_time=0.3 --out " + q(p.dir / "tmax"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto low = times(p.dir / "tmax" / "metrics.jsonl");

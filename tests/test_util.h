@@ -5,7 +5,11 @@
 #include <array>
 #include <cstdio>
 #include <functional>
+#include <sstream>
 #include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "gaia/core/error.h"
 #include "gaia/core/fs.h"
@@ -65,6 +69,15 @@ inline std::string error_of(const std::function<void()>& f) {
     return e.what();
   }
   return "";
+}
+
+// One number per line of a metrics.jsonl (training runs write one JSON object per step): the field `key` of each.
+inline std::vector<double> jsonl_numbers(const fs::path& metrics, const std::string& key) {
+  std::vector<double> out;
+  std::istringstream in(read_file(metrics));
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) out.push_back(nlohmann::json::parse(line).at(key).get<double>());
+  return out;
 }
 
 inline fs::path source_dir() { return fs::path(GAIA_SOURCE_DIR); }

@@ -317,13 +317,7 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   const std::string base = "world train " + q(p.tokens) + p.tiny() + " --init " + q(init) + " --distill-from " +
                            q(init) + " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2" +
                            " --set world.p_text=0.6 --steps 5 --val-every 100";
-  auto kls = [](const fs::path& metrics) {
-    std::vector<double> k;
-    std::istringstream in(read_file(metrics));
-    for (std::string line; std::getline(in, line);)
-      if (!line.empty()) k.push_back(nlohmann::json::parse(line).at("distill").get<double>());
-    return k;
-  };
+  auto kls = [](const fs::path& metrics) { return test::jsonl_numbers(metrics, "distill"); };
   auto r = test::run_gaia(base + " --distill-weight 100 --out " + q(p.dir / "distil-heavy"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("distilling text-only and unconditional predictions from"), std::string::npos) << r.output;
