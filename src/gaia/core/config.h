@@ -79,8 +79,8 @@ struct WorldConfig {
   // Share of action-conditioned examples among windows of counterfactual replays (episodes with metadata replay_of,
   // `gaia synth counterfactuals`); the rest are unconditional or text-conditioned in the ratio above. -1 = the mix
   // above for every window. Replays show what a command does from a recorded state, so they teach action control;
-  // raising action conditioning on them alone keeps every other window's share of text examples (an all-windows
-  // 60% cost the CPU model its text control: docs/evaluation.md, "Counterfactual replays as training data").
+  // raising action conditioning on them alone keeps every other window's share of text examples. (On the CPU model
+  // that did not keep weather prompting either: docs/evaluation.md, "Counterfactual replays as training data".)
   double p_action_replay = -1;
   // paper §4.2 optimiser: AdamW lr 1e-4, wd 0.1, betas (0.9, 0.95), clip 1.0; 2.5k warm-up, cosine to lr/10
   // (batch 512 x 15860 tokens, 100k steps). The CPU recipe trains 3k steps of 4 x 1296 tokens, so, as for small
