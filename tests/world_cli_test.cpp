@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <sstream>
 
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"

@@ -154,8 +154,9 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     auto logits = model->forward(batch);
     auto loss = image_token_loss(logits, batch.tokens);
     const double lv = loss.item<double>();  // logged: the cross-entropy alone, comparable with runs without a teacher
-    double kl = -1;
-    if (teacher) {
+    double kl = teacher ? 0 : -1;
+    // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
+    if (teacher && !batch.use_action.all().item<bool>()) {
       torch::Tensor tl;
       {
         torch::NoGradGuard no_grad;
