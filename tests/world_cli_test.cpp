@@ -303,9 +303,10 @@ TEST(WorldCli, FineTuneTrainsOnlyTheNamedParameters) {
 }
 
 // --distill-from (learning without forgetting, world/distill.h): metrics.jsonl records the KL term to the teacher on
-// the examples that are not action-conditioned. It is 0 at the first step (the model starts as the teacher), and a
-// heavy weight keeps it below what a negligible one lets it grow to. A teacher with another text vocabulary, a
-// missing teacher and a weight of 0 are one error line each, with nothing written.
+// the examples that are not action-conditioned, and with --distill-other-text the one under other examples'
+// captions. Each is 0 at the first step (the model starts as the teacher), and a heavy weight keeps it below what a
+// negligible one lets it grow to. A teacher with another text vocabulary, a missing teacher, a weight of 0 and
+// --distill-other-text without a teacher are one error line each, with nothing written.
 TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   auto& p = Pipeline::get();
   if (!fs::exists(p.run / "world.safetensors")) {
@@ -315,26 +316,28 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   const fs::path init = p.run / "world.safetensors";
   const std::string base = "world train " + q(p.tokens) + p.tiny() + " --init " + q(init) + " --distill-from " +
                            q(init) + " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2" +
-                           " --set world.p_text=0.6 --steps 5 --val-every 100";
-  auto kls = [](const fs::path& metrics) { return test::jsonl_numbers(metrics, "distill"); };
+                           " --set world.p_text=0.6 --steps 5 --val-every 100 --distill-other-text";
   auto r = test::run_gaia(base + " --distill-weight 100 --out " + q(p.dir / "distil-heavy"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("distilling text-only and unconditional predictions from"), std::string::npos) << r.output;
   r = test::run_gaia(base + " --distill-weight 1e-9 --out " + q(p.dir / "distil-light"));
   ASSERT_EQ(r.status, 0) << r.output;
-  auto heavy = kls(p.dir / "distil-heavy" / "metrics.jsonl"), light = kls(p.dir / "distil-light" / "metrics.jsonl");
-  ASSERT_EQ(heavy.size(), 5u);
-  ASSERT_EQ(light.size(), 5u);
-  EXPECT_NEAR(heavy[0], 0.0, 1e-5);
-  EXPECT_NEAR(light[0], 0.0, 1e-5);
-  double h = 0, l = 0;
-  for (size_t i = 2; i < 5; ++i) {
-    EXPECT_GE(heavy[i], 0.0);
-    h += heavy[i];
-    l += light[i];
+  for (const char* key : {"distill", "distill_other"}) {
+    auto heavy = test::jsonl_numbers(p.dir / "distil-heavy" / "metrics.jsonl", key);
+    auto light = test::jsonl_numbers(p.dir / "distil-light" / "metrics.jsonl", key);
+    ASSERT_EQ(heavy.size(), 5u) << key;
+    ASSERT_EQ(light.size(), 5u) << key;
+    EXPECT_NEAR(heavy[0], 0.0, 1e-5) << key;
+    EXPECT_NEAR(light[0], 0.0, 1e-5) << key;
+    double h = 0, l = 0;
+    for (size_t i = 2; i < 5; ++i) {
+      EXPECT_GE(heavy[i], 0.0) << key;
+      h += heavy[i];
+      l += light[i];
+    }
+    EXPECT_GT(l, 1e-4) << key;  // the model has moved away from the teacher ...
+    EXPECT_LT(h, 0.5 * l) << key << ": heavy " << h << " light " << l;  // ... less where the term weighs
   }
-  EXPECT_GT(l, 1e-4);  // the model has moved away from the teacher ...
-  EXPECT_LT(h, 0.5 * l) << "heavy " << h << " light " << l;  // ... less where the term weighs
 
   // A teacher whose text ids mean other words: a model trained from scratch on a bare token file has no vocabulary.
   fs::path first;
@@ -354,6 +357,10 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   r = test::run_gaia(base + " --distill-weight 0 --out " + q(p.dir / "distil-bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--distill-weight must be a positive number"), std::string::npos) << r.output;
+  r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --distill-other-text --steps 1 --out " +
+                     q(p.dir / "distil-bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--distill-other-text needs --distill-from"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "distil-bad" / "world.safetensors"));
 }
 

@@ -492,6 +492,33 @@ TEST(WorldData, BatchToAndSliceSteps) {
   EXPECT_FALSE(c.text_emb.defined());
 }
 
+// Other examples' captions for the same frames (--distill-other-text): example b of the first n gets example b+1's
+// text (the last one the first's), text on and actions off; frames and actions stay the example's own.
+TEST(WorldData, RolledTextGivesEachExampleTheNextOnesCaption) {
+  test::TempDir dir;
+  TokenDataset ds(make_small(dir));
+  Vocab v = world::build_vocab(ds, {0}, 32);
+  std::mt19937_64 rng(3);
+  WorldBatch b = ds.make_batch({{0, 0, 6}, {2, 3, 6}, {0, 2, 6}}, &v, 2, ConditioningMix{}, rng);
+  ASSERT_FALSE(torch::equal(b.text_ids[0], b.text_ids[1]));  // clear and fog: the roll is visible
+  WorldBatch r = b.with_rolled_text(3);
+  ASSERT_EQ(r.batch(), 3);
+  for (int64_t i = 0; i < 3; ++i) {
+    EXPECT_TRUE(torch::equal(r.tokens[i], b.tokens[i]));
+    EXPECT_TRUE(same(r.actions[i], b.actions[i]));
+    EXPECT_TRUE(torch::equal(r.text_ids[i], b.text_ids[(i + 1) % 3]));
+  }
+  EXPECT_TRUE(r.use_text.all().item<bool>());
+  EXPECT_FALSE(r.use_action.any().item<bool>());
+  WorldBatch h = b.with_rolled_text(2);  // the first two only, still rolled over the whole batch
+  ASSERT_EQ(h.batch(), 2);
+  EXPECT_TRUE(torch::equal(h.text_ids[1], b.text_ids[2]));
+  EXPECT_NE(test::error_of([&] { b.with_rolled_text(4); }).find("with_rolled_text"), std::string::npos);
+  WorldBatch bare = b;
+  bare.text_ids = torch::Tensor();
+  EXPECT_NE(test::error_of([&] { bare.with_rolled_text(1); }).find("no text"), std::string::npos);
+}
+
 TEST(WorldData, TokenizeCopiesTheSourceSplit) {
   test::TempDir dir;
   test::synth_dataset(dir / "ds", 3, 0.4);

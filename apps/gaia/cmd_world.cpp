@@ -57,6 +57,9 @@ void register_world(CLI::App& app) {
                     "keep the text-conditioned and unconditional predictions of these weights (usually --init's): every "
                     "example that is not action-conditioned adds a KL term to them (learning without forgetting)");
     cmd->add_option("--distill-weight", o->distill_weight, "weight of that KL term");
+    cmd->add_flag("--distill-other-text", o->distill_other_text,
+                  "with --distill-from: also keep its text-conditioned predictions when half the batch is given other "
+                  "examples' captions (prompts that contradict the frames, as text prompting does); ~1.5x step time");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
@@ -72,6 +75,7 @@ void register_world(CLI::App& app) {
             if (!bar) bar = std::make_unique<ProgressBar>(l.total, "world", true, l.step);  // a resumed run starts mid-way
             std::string info = fmt::format("loss {:.3f} {:.0f} tok/s", l.loss, l.tokens_per_s);
             if (l.distill >= 0) info += fmt::format(" kl {:.4f}", l.distill);
+            if (l.distill_other >= 0) info += fmt::format(" / {:.4f}", l.distill_other);
             if (l.validation && !l.val.empty())
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
             bar->update(l.step, info);

@@ -21,4 +21,14 @@ WorldBatch WorldBatch::slice_steps(int64_t t0, int64_t t1) const {
                     steps_of(text_emb, t0, t1), use_action, use_text};
 }
 
+WorldBatch WorldBatch::with_rolled_text(int64_t n) const {
+  if (!text_ids.defined() && !text_emb.defined()) fail("with_rolled_text: the batch has no text");
+  if (!(1 <= n && n <= batch())) fail("with_rolled_text: {} examples asked of a batch of {}", n, batch());
+  auto rolled = [&](const torch::Tensor& t) { return t.defined() ? t.roll(-1, 0).slice(0, 0, n) : t; };
+  auto first = [&](const torch::Tensor& t) { return t.slice(0, 0, n); };
+  auto opts = torch::TensorOptions().dtype(torch::kBool).device(tokens.device());
+  return WorldBatch{first(tokens), first(actions), rolled(text_ids), rolled(text_emb), torch::zeros({n}, opts),
+                    torch::ones({n}, opts)};
+}
+
 }  // namespace gaia::world

@@ -119,6 +119,12 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     teacher->eval();
     for (auto& p : teacher->parameters()) p.set_requires_grad(false);
     note("distilling text-only and unconditional predictions from " + opt.distill_from.string());
+    if (opt.distill_other_text) {
+      if (!ds.has_captions()) fail("--distill-other-text: {} has no captions", opt.tokens.string());
+      note("... and text-conditioned predictions under other examples' captions");
+    }
+  } else if (opt.distill_other_text) {
+    fail("--distill-other-text needs --distill-from (the weights whose predictions it keeps)");
   }
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
@@ -167,6 +173,21 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       if (!std::isfinite(kl)) fail("world model training diverged at step {} (the distillation term is not finite)", step);
       loss = loss + opt.distill_weight * d;
     }
+    double kl_other = -1;
+    if (teacher && opt.distill_other_text) {
+      // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
+      auto other = batch.with_rolled_text(std::max<int64_t>(1, batch.batch() / 2));
+      torch::Tensor tl;
+      {
+        torch::NoGradGuard no_grad;
+        tl = teacher->forward(other);
+      }
+      auto d = image_token_kl(model->forward(other), tl, other.use_text);
+      kl_other = d.item<double>();
+      if (!std::isfinite(kl_other))
+        fail("world model training diverged at step {} (the distillation term is not finite)", step);
+      loss = loss + opt.distill_weight * d;
+    }
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
     optim->zero_grad();
     loss.backward();
@@ -180,6 +201,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     log.loss = lv;
     log.grad_norm = gn;
     log.distill = kl;
+    log.distill_other = kl_other;
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (loop.validate_now(step, opt.val_every)) {
@@ -190,6 +212,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
                                {"tokens_per_s", log.tokens_per_s}, {"val", log.val}});
     if (teacher) record["distill"] = kl;
+    if (kl_other >= 0) record["distill_other"] = kl_other;
     if (on_step) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }

@@ -29,12 +29,17 @@ struct WorldTrainOptions {
   // control keeps the text-conditioned and unconditional predictions that text guidance mixes. Empty = off.
   fs::path distill_from;
   double distill_weight = 1.0;
+  // Also hold the text-conditioned prediction under another example's caption (WorldBatch::with_rolled_text, half
+  // the batch) to the teacher's: the prompt then may contradict the frames, which is where text guidance works and
+  // where no drive of the data shows what should happen (the weather does not change within a drive).
+  bool distill_other_text = false;
 };
 
 struct WorldStepLog {
   int step = 0, total = 0;
   double lr = 0, loss = 0, grad_norm = 0, tokens_per_s = 0;
   double distill = -1;        // the KL term (nats per image token) when distilling, else -1
+  double distill_other = -1;  // the KL term under other examples' captions (distill_other_text), else -1
   bool validation = false;
   nlohmann::json val;         // {"action": nats, "text": nats, "uncond": nats, "bits_action": ...}
 };
