@@ -160,33 +160,27 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     auto logits = model->forward(batch);
     auto loss = image_token_loss(logits, batch.tokens);
     const double lv = loss.item<double>();  // logged: the cross-entropy alone, comparable with runs without a teacher
-    double kl = teacher ? 0 : -1;
-    // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
-    if (teacher && !batch.use_action.all().item<bool>()) {
+    // The KL term to the teacher on the examples `keep` of batch b, added to the loss; returns its value.
+    auto distil = [&](const WorldBatch& b, const torch::Tensor& student, const torch::Tensor& keep) {
       torch::Tensor tl;
       {
         torch::NoGradGuard no_grad;
-        tl = teacher->forward(batch);
+        tl = teacher->forward(b);
       }
-      auto d = image_token_kl(logits, tl, batch.use_action.logical_not());
-      kl = d.item<double>();
-      if (!std::isfinite(kl)) fail("world model training diverged at step {} (the distillation term is not finite)", step);
+      auto d = image_token_kl(student, tl, keep);
+      const double v = d.item<double>();
+      if (!std::isfinite(v))
+        fail("world model training diverged at step {} (the distillation term is not finite)", step);
       loss = loss + opt.distill_weight * d;
-    }
-    double kl_other = -1;
+      return v;
+    };
+    double kl = teacher ? 0 : -1, kl_other = -1;
+    // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
+    if (teacher && !batch.use_action.all().item<bool>()) kl = distil(batch, logits, batch.use_action.logical_not());
     if (teacher && opt.distill_other_text) {
       // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
       auto other = batch.with_rolled_text(std::max<int64_t>(1, batch.batch() / 2));
-      torch::Tensor tl;
-      {
-        torch::NoGradGuard no_grad;
-        tl = teacher->forward(other);
-      }
-      auto d = image_token_kl(model->forward(other), tl, other.use_text);
-      kl_other = d.item<double>();
-      if (!std::isfinite(kl_other))
-        fail("world model training diverged at step {} (the distillation term is not finite)", step);
-      loss = loss + opt.distill_weight * d;
+      kl_other = distil(other, model->forward(other), other.use_text);
     }
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
     optim->zero_grad();
