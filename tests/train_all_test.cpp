@@ -70,6 +70,10 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   EXPECT_NE(log[8]["command"].get<std::string>().find("synth counterfactuals"), std::string::npos);
   EXPECT_NE(log[10]["command"].get<std::string>().find("--init"), std::string::npos);  // world-cf: the fine-tune
   EXPECT_NE(log[10]["command"].get<std::string>().find("--steps 2"), std::string::npos);
+  // ... at half the rate, its text-only and unconditional predictions held to the first phase's (the shipped recipe).
+  EXPECT_NE(log[10]["command"].get<std::string>().find("--distill-from"), std::string::npos);
+  EXPECT_NE(log[10]["command"].get<std::string>().find("world.lr=1.5e-4"), std::string::npos);
+  EXPECT_NE(log[10]["command"].get<std::string>().find("world.p_action=0.6"), std::string::npos);
   // The shipped world model is the calibrated fine-tune, fitted on the lane-keeping drives (not on their replays).
   EXPECT_NE(log[11]["command"].get<std::string>().find("world calibrate"), std::string::npos);
   EXPECT_NE(log[11]["command"].get<std::string>().find("world-cf"), std::string::npos);

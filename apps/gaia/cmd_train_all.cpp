@@ -45,7 +45,7 @@ void register_train_all(CLI::App& app) {
   // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
   // each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 0, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
+    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -66,8 +66,8 @@ void register_train_all(CLI::App& app) {
                   "tokenizer decoder-only steps with refinement and token blocks added (0 = no such stage)");
   cmd->add_option("--world-steps", st->world, "world model steps");
   cmd->add_option("--world-cf-steps", st->world_cf,
-                  "world model fine-tune steps with counterfactual replays added (0 = no such stage, the shipped "
-                  "recipe; 800 is the candidate in docs/evaluation.md, \"Counterfactual replays as training data\")");
+                  "world model fine-tune steps with counterfactual replays added (recipe: 800; 0 = no such stage, "
+                  "the world model of the first phase is calibrated and shipped)");
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
   cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
@@ -145,8 +145,10 @@ void register_train_all(CLI::App& app) {
                                  "--set", "tokenizer.ema_decay=0.999"}),
                      tok});
     // Counterfactual replays of the lane-keeping training drives under held random steering commands, added to the
-    // tokens after the world model's first phase, which then fine-tunes on both. Not yet part of the shipped recipe:
-    // it lifts steering and costs text control (docs/evaluation.md, "Counterfactual replays as training data").
+    // tokens after the world model's first phase, which then fine-tunes on both at half its rate, more often
+    // action-conditioned (0.6 / 0.25 / 0.15), its text-only and unconditional predictions held to the first phase's
+    // (--distill-from): steering improves and text prompting is kept (docs/evaluation.md, "Counterfactual replays
+    // as training data").
     if (st->world_cf > 0) {
       const std::string cf = (out / "synth-cf").string(), first = (out / "world" / "world.safetensors").string();
       const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
@@ -157,9 +159,10 @@ void register_train_all(CLI::App& app) {
                          {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
                           out / "tokens" / ".complete-cf", true},
                          {"world-cf",
-                          with({"world", "train", tokens, "--init", first, "--steps", std::to_string(st->world_cf),
-                                "--set", "world.lr=3e-4", "--set", "world.warmup_steps=50", "--out",
-                                (out / "world-cf").string()}),
+                          with({"world", "train", tokens, "--init", first, "--distill-from", first, "--steps",
+                                std::to_string(st->world_cf), "--set", "world.lr=1.5e-4", "--set",
+                                "world.warmup_steps=50", "--set", "world.p_action=0.6", "--set", "world.p_text=0.25",
+                                "--set", "world.p_uncond=0.15", "--out", (out / "world-cf").string()}),
                           trained}});
     }
     std::vector<Stage> more_drives;
