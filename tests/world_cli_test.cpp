@@ -305,8 +305,8 @@ TEST(WorldCli, FineTuneTrainsOnlyTheNamedParameters) {
 // --distill-from (learning without forgetting, world/distill.h): metrics.jsonl records the KL term to the teacher on
 // the examples that are not action-conditioned, and with --distill-other-text the one under other examples'
 // captions. Each is 0 at the first step (the model starts as the teacher), and a heavy weight keeps it below what a
-// negligible one lets it grow to. A teacher with another text vocabulary, a missing teacher, a weight of 0 and
-// --distill-other-text without a teacher are one error line each, with nothing written.
+// negligible one lets it grow to. A teacher with another text vocabulary, a missing teacher, a weight of 0, and
+// --distill-other-text without a teacher or without captions are one error line each, with nothing written.
 TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   auto& p = Pipeline::get();
   if (!fs::exists(p.run / "world.safetensors")) {
@@ -350,6 +350,13 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
                      q(p.dir / "novocab" / "world.safetensors") + " --steps 1 --out " + q(p.dir / "distil-bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("its text vocabulary differs"), std::string::npos) << r.output;
+  // Other examples' captions need captions: the bare token file has none.
+  r = test::run_gaia("world train " + q(p.dir / "bare-distil.npy") + p.tiny() + " --distill-from " +
+                     q(p.dir / "novocab" / "world.safetensors") + " --distill-other-text --steps 1 --out " +
+                     q(p.dir / "distil-bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--distill-other-text: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("has no captions"), std::string::npos) << r.output;
   r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --distill-from " + q(p.dir / "nosuch.safetensors") +
                      " --steps 1 --out " + q(p.dir / "distil-bad"));
   EXPECT_NE(r.status, 0);
