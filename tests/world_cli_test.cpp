@@ -444,6 +444,27 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     ASSERT_EQ(w.size(), 1u) << it.key();
     EXPECT_NEAR(w[0].get<double>(), it.value()["read_curvature"].get<double>(), 1e-9) << it.key();
   }
+  // Per command, each prompt's read-back (their mean is the command's) and the command's sign accuracy; the steered
+  // commands have as many rollouts each, so the mean of their accuracies is the overall one.
+  double sign_sum = 0;
+  int steered = 0;
+  for (auto it = a["per_command"].begin(); it != a["per_command"].end(); ++it) {
+    const auto& c = it.value();
+    const auto by = c["read_curvature_by_rollout"].get<std::vector<double>>();
+    ASSERT_EQ(by.size(), 2u) << it.key();  // one per prompt
+    EXPECT_NEAR((by[0] + by[1]) / 2, c["read_curvature"].get<double>(), 1e-9) << it.key();
+    const double cmd = c["commanded_curvature"].get<double>();
+    if (std::abs(cmd) < 0.002) {
+      EXPECT_FALSE(c.contains("steering_sign_accuracy")) << it.key();  // straight, slow, fast
+      continue;
+    }
+    const double right = ((by[0] > 0) == (cmd > 0)) + ((by[1] > 0) == (cmd > 0));
+    EXPECT_DOUBLE_EQ(c["steering_sign_accuracy"].get<double>(), right / 2) << it.key();
+    sign_sum += right / 2;
+    ++steered;
+  }
+  EXPECT_EQ(steered, 5);  // left, right, strong-left, strong-right, drift-right
+  EXPECT_NEAR(sign_sum / steered, a["conditioned"]["steering_sign_accuracy"].get<double>(), 1e-12);
   for (const char* k : {"conditioned", "without_actions", "counterfactual_probe", "counterfactual_probe_tokenized"})
     EXPECT_TRUE(a[k].contains("curvature_spearman")) << k;
   // Teacher-forced replay under the command and the counter-command: the straight command at the kept speed is its

@@ -271,8 +271,11 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   for (int64_t c = 0; c < C; ++c) {
     double a = 0, b = 0, t = 0, cs = 0, rs = 0;
     std::vector<double> by_window(W, 0.0);  // when in the rollout the turn is made (or given up)
+    std::vector<double> by_rollout, commanded;  // which prompts turn the wrong way
     for (int i = 0; i < o.prompts; ++i) {
       const size_t r = size_t(i * C + c);
+      by_rollout.push_back(rw.curvature[r]);
+      commanded.push_back(cmd_curv[r]);
       for (size_t k = 0; k < W; ++k) by_window[k] += rw.pair_read[r * W + k] / o.prompts;
       a += rw.curvature[r] / o.prompts;
       b += rn.curvature[r] / o.prompts;
@@ -295,9 +298,11 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
     s_null.y.push_back(b * 1000);
     s_truth.y.push_back(t * 1000);
     per[cmds[size_t(c)].name] = {{"commanded_curvature", cmd_curv[size_t(c)]}, {"read_curvature", a},
-                                 {"read_curvature_by_window", by_window},
+                                 {"read_curvature_by_window", by_window}, {"read_curvature_by_rollout", by_rollout},
                                  {"read_curvature_without_actions", b}, {"commanded_speed", cs}, {"read_speed", rs},
                                  {"out_of_distribution", cmds[size_t(c)].out_of_distribution}};
+    if (std::abs(cmd_curv[size_t(c)]) >= kSteerThreshold)  // its share of the steering sign accuracy
+      per[cmds[size_t(c)].name]["steering_sign_accuracy"] = sign_accuracy(commanded, by_rollout);
     if (raw) {
       auto& row = per[cmds[size_t(c)].name];
       row["read_curvature_counterfactual"] = t;
