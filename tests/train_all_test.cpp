@@ -39,7 +39,7 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
     EXPECT_EQ(f32, 0) << f;
   }
   auto log = nlohmann::json::parse(read_file(d / "runs" / "train-all.json"));
-  ASSERT_EQ(log.size(), 15u + 5u);  // 15 training stages + 5 ship copies
+  ASSERT_EQ(log.size(), 16u + 5u);  // 16 training stages + 5 ship copies
   EXPECT_NE(log[5]["command"].get<std::string>().find("--decoder-only"), std::string::npos);  // tokenizer-refine
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.token_blocks=2"), std::string::npos);
   EXPECT_NE(log[5]["command"].get<std::string>().find("tokenizer.ema_decay=0.999"), std::string::npos);
@@ -74,10 +74,16 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   EXPECT_NE(log[10]["command"].get<std::string>().find("--distill-from"), std::string::npos);
   EXPECT_NE(log[10]["command"].get<std::string>().find("world.lr=1.5e-4"), std::string::npos);
   EXPECT_NE(log[10]["command"].get<std::string>().find("world.p_action=0.6"), std::string::npos);
-  // The shipped world model is the calibrated fine-tune, fitted on the lane-keeping drives (not on their replays).
-  EXPECT_NE(log[11]["command"].get<std::string>().find("world calibrate"), std::string::npos);
-  EXPECT_NE(log[11]["command"].get<std::string>().find("world-cf"), std::string::npos);
-  EXPECT_NE(log[11]["command"].get<std::string>().find("--without-meta synth_wander --without-meta replay_of"), std::string::npos);
+  // Its second round starts from the first round's weights and is still held to the first phase's predictions.
+  const std::string round2 = log[11]["command"].get<std::string>();
+  EXPECT_EQ(log[11]["stage"], "world-cf2");
+  EXPECT_NE(round2.find("--init " + (d / "runs" / "world-cf" / "world.safetensors").string()), std::string::npos) << round2;
+  EXPECT_NE(round2.find("--distill-from " + (d / "runs" / "world" / "world.safetensors").string()), std::string::npos) << round2;
+  EXPECT_NE(round2.find("--out " + (d / "runs" / "world-cf2").string()), std::string::npos) << round2;
+  // The shipped world model is the calibrated last round, fitted on the lane-keeping drives (not on their replays).
+  EXPECT_NE(log[12]["command"].get<std::string>().find("world calibrate"), std::string::npos);
+  EXPECT_NE(log[12]["command"].get<std::string>().find("world-cf2"), std::string::npos);
+  EXPECT_NE(log[12]["command"].get<std::string>().find("--without-meta synth_wander --without-meta replay_of"), std::string::npos);
   world::WorldInfo shipped;
   world::load_world(d / "models" / "world.safetensors", torch::kCPU, &shipped);
   EXPECT_NE(shipped.config.world.copy_bias, 0.0);
@@ -94,10 +100,14 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   // Again: nothing left to do.
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 20) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 21) << r.output;
   // A bad config key fails before any stage starts, naming the key.
   r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("world.bogus"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "x"));
+  r = test::run_gaia("train-all --world-cf-rounds 0 --out " + q(d / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--world-cf-rounds"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "x"));
 }

@@ -45,7 +45,8 @@ void register_train_all(CLI::App& app) {
   // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
   // each approximates).
   struct Steps {
-    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, decoder = 1300, probe_scene = 1500, probe_dynamics = 4000;
+    int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
+        probe_scene = 1500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -68,6 +69,9 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--world-cf-steps", st->world_cf,
                   "world model fine-tune steps with counterfactual replays added (recipe: 800; 0 = no such stage, "
                   "the world model of the first phase is calibrated and shipped)");
+  cmd->add_option("--world-cf-rounds", st->world_cf_rounds,
+                  "rounds of that fine-tune, each from the last one's weights with a fresh warm-up, all held to the "
+                  "first phase's predictions (recipe: 2, as the shipped model was made)");
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
   cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
@@ -87,7 +91,11 @@ void register_train_all(CLI::App& app) {
     const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
     const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
     const std::string tokens = (out / "tokens").string();
-    const std::string trained = (st->world_cf > 0 ? out / "world-cf" : out / "world") / "world.safetensors";
+    if (st->world_cf < 0) fail("--world-cf-steps must be >= 0, got {}", st->world_cf);
+    if (st->world_cf_rounds < 1) fail("--world-cf-rounds must be >= 1, got {}", st->world_cf_rounds);
+    // The fine-tune's rounds write world-cf, world-cf2, ...
+    auto cf_dir = [&](int round) { return out / (round == 1 ? std::string("world-cf") : fmt::format("world-cf{}", round)); };
+    const std::string trained = (st->world_cf > 0 ? cf_dir(st->world_cf_rounds) : out / "world") / "world.safetensors";
     const std::string world = (out / "world-calibrated" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
@@ -112,7 +120,7 @@ void register_train_all(CLI::App& app) {
         // ones, and the shipped model's steering reaches its targets with them (MODEL_CARD.md, "World model").
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
-         trained},
+         out / "world" / "world.safetensors"},
         // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
         // then copy like real video (MODEL_CARD.md, "Copy calibration").
         {"world-calibrate",
@@ -152,18 +160,25 @@ void register_train_all(CLI::App& app) {
     if (st->world_cf > 0) {
       const std::string cf = (out / "synth-cf").string(), first = (out / "world" / "world.safetensors").string();
       const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
-      stages.insert(at, {{"data-counterfactuals",
-                          with({"synth", "counterfactuals", synth, "--without-meta", "synth_wander", "--per-episode", "6",
-                                "--lead", "1.5", "--hold", "2", "--max-curvature", "0.045", "--out", cf}),
-                          out / "synth-cf" / ".complete", true},
-                         {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
-                          out / "tokens" / ".complete-cf", true},
-                         {"world-cf",
-                          with({"world", "train", tokens, "--init", first, "--distill-from", first, "--steps",
-                                std::to_string(st->world_cf), "--set", "world.lr=1.5e-4", "--set",
-                                "world.warmup_steps=50", "--set", "world.p_action=0.6", "--set", "world.p_text=0.25",
-                                "--set", "world.p_uncond=0.15", "--out", (out / "world-cf").string()}),
-                          trained}});
+      std::vector<Stage> cf_stages = {
+          {"data-counterfactuals",
+           with({"synth", "counterfactuals", synth, "--without-meta", "synth_wander", "--per-episode", "6", "--lead",
+                 "1.5", "--hold", "2", "--max-curvature", "0.045", "--out", cf}),
+           out / "synth-cf" / ".complete", true},
+          {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
+           out / "tokens" / ".complete-cf", true}};
+      // A second round from the first one's weights steers better still and keeps the long rollouts within their
+      // targets (docs/evaluation.md, "DL2"); every round is held to the first phase, not to the round before.
+      for (int round = 1; round <= st->world_cf_rounds; ++round) {
+        const std::string init = round == 1 ? first : (cf_dir(round - 1) / "world.safetensors").string();
+        cf_stages.push_back({cf_dir(round).filename().string(),
+                             with({"world", "train", tokens, "--init", init, "--distill-from", first, "--steps",
+                                   std::to_string(st->world_cf), "--set", "world.lr=1.5e-4", "--set",
+                                   "world.warmup_steps=50", "--set", "world.p_action=0.6", "--set", "world.p_text=0.25",
+                                   "--set", "world.p_uncond=0.15", "--out", cf_dir(round).string()}),
+                             cf_dir(round) / "world.safetensors"});
+      }
+      stages.insert(at, cf_stages.begin(), cf_stages.end());
     }
     std::vector<Stage> more_drives;
     auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
