@@ -33,9 +33,9 @@ using Rows = std::vector<std::vector<cv::Mat>>;
 struct DemoFlags {
   std::string models = "models", video;
   int prompt_frames = 3, frames = 10, ddim_steps = 10;
-  // Text guidance: with the shipped world model constant s = 4 reads weather / time of day at 79-81% / 100% over
-  // three seeds, and s = 6 and 8 swing more between seeds (66-94%), so the demo keeps s = 4 on every frame
-  // (docs/evaluation.md, "Text control").
+  // Text guidance: with an earlier world model constant s = 4 read weather / time of day at 79-81% / 100% over
+  // three seeds, and s = 6 and 8 swung more between seeds (66-94%), so the demo keeps s = 4 on every frame
+  // (docs/evaluation.md, "Text control"; the shipped model reads 74% / 98% at s = 4, 78% / 96% at s = 8).
   double fps = 12.5, guidance = 4.0;
   // Guidance on the actions (eq. 2 with the mirrored command as the unconditional branch, within the conditional
   // top k): the shipped world model steers best at s = 16 (docs/evaluation.md, "Action control").
