@@ -485,11 +485,24 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   // Text: one row per scale, then the negative prompt and the schedules; accuracies are fractions.
   const auto& runs = j["text_control"]["runs"];
   ASSERT_EQ(runs.size(), 4u);
-  for (const auto& row : runs)
+  for (const auto& row : runs) {
     for (const char* k : {"weather", "time_of_day", "light"}) {
       EXPECT_GE(row[k].get<double>(), 0.0);
       EXPECT_LE(row[k].get<double>(), 1.0);
     }
+    // What each prompt's frames were read as: fractions over the attribute's classes that sum to one, the prompted
+    // class's share being its accuracy.
+    ASSERT_EQ(row["read_as"].size(), row["per_target"].size()) << row.dump();
+    for (auto it = row["read_as"].begin(); it != row["read_as"].end(); ++it) {
+      double sum = 0;
+      for (auto c = it.value().begin(); c != it.value().end(); ++c) {
+        EXPECT_GT(c.value().get<double>(), 0.0) << it.key() << " " << c.key();
+        sum += c.value().get<double>();
+      }
+      EXPECT_NEAR(sum, 1.0, 1e-9) << it.key();
+      EXPECT_NEAR(it.value().value(it.key(), 0.0), row["per_target"][it.key()].get<double>(), 1e-12) << it.key();
+    }
+  }
   // The ceiling row: the probe on real held-out frames through the same decoder, for the prompted kinds it has.
   const auto& real = j["text_control"]["real_decoded"];
   EXPECT_EQ(real["frames"].get<int>(), 16);

@@ -120,20 +120,29 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
     auto r = world::rollout(m.world, q, ro);
     auto frames = decode(m, r.tokens);
     std::vector<double> hit(3, 0), total(3, 0);
-    nlohmann::json per = nlohmann::json::object();
+    nlohmann::json per = nlohmann::json::object(), read_as = nlohmann::json::object();
     for (int64_t g = 0; g < G; ++g) {
       const auto& t = targets[size_t(g)];
-      const int want = probe::class_index(classes(t.attribute), t.value);
+      const auto& names = classes(t.attribute);
+      const int want = probe::class_index(names, t.value);
+      std::vector<double> got(names.size(), 0.0);  // frames read as each class: what a missed prompt looks like
       double h = 0, n = 0;
       for (int f = 0; f < o.futures; ++f) {
         auto cls = read_scene(m, frames[size_t(g * o.futures + f)]);  // [F, 4]
-        for (int64_t k = 0; k < F; ++k, ++n) h += cls[k][t.attribute].item<int64_t>() == want;
+        for (int64_t k = 0; k < F; ++k, ++n) {
+          const int64_t c = cls[k][t.attribute].item<int64_t>();
+          h += c == want;
+          got[size_t(c)] += 1;
+        }
       }
       per[t.value] = h / n;
+      read_as[t.value] = nlohmann::json::object();
+      for (size_t c = 0; c < names.size(); ++c)
+        if (got[c] > 0) read_as[t.value][names[c]] = got[c] / n;
       hit[size_t(t.attribute)] += h;
       total[size_t(t.attribute)] += n;
     }
-    nlohmann::json row = {{"setting", run.name}, {"per_target", per}};
+    nlohmann::json row = {{"setting", run.name}, {"per_target", per}, {"read_as", read_as}};
     for (int a = 0; a < 3; ++a) {
       row[kAttributes[a]] = hit[size_t(a)] / total[size_t(a)];
       if (ri < o.scales.size()) curves[size_t(a)].y.push_back(hit[size_t(a)] / total[size_t(a)]);
