@@ -95,7 +95,8 @@ void register_train_all(CLI::App& app) {
     if (st->world_cf_rounds < 1) fail("--world-cf-rounds must be >= 1, got {}", st->world_cf_rounds);
     // The fine-tune's rounds write world-cf, world-cf2, ...
     auto cf_dir = [&](int round) { return out / (round == 1 ? std::string("world-cf") : fmt::format("world-cf{}", round)); };
-    const std::string trained = (st->world_cf > 0 ? cf_dir(st->world_cf_rounds) : out / "world") / "world.safetensors";
+    const fs::path first_phase = out / "world" / "world.safetensors";  // the world model before any fine-tune
+    const std::string trained = st->world_cf > 0 ? (cf_dir(st->world_cf_rounds) / "world.safetensors").string() : first_phase.string();
     const std::string world = (out / "world-calibrated" / "world.safetensors").string();
     const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
     const std::string seed = std::to_string(c.run.seed);
@@ -120,7 +121,7 @@ void register_train_all(CLI::App& app) {
         // ones, and the shipped model's steering reaches its targets with them (MODEL_CARD.md, "World model").
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
-         out / "world" / "world.safetensors"},
+         first_phase},
         // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
         // then copy like real video (MODEL_CARD.md, "Copy calibration").
         {"world-calibrate",
@@ -158,7 +159,7 @@ void register_train_all(CLI::App& app) {
     // (--distill-from): steering improves and text prompting is kept (docs/evaluation.md, "Counterfactual replays
     // as training data").
     if (st->world_cf > 0) {
-      const std::string cf = (out / "synth-cf").string(), first = (out / "world" / "world.safetensors").string();
+      const std::string cf = (out / "synth-cf").string(), first = first_phase.string();
       const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
       std::vector<Stage> cf_stages = {
           {"data-counterfactuals",

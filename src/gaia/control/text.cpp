@@ -126,15 +126,12 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
       const auto& names = classes(t.attribute);
       const int want = probe::class_index(names, t.value);
       std::vector<double> got(names.size(), 0.0);  // frames read as each class: what a missed prompt looks like
-      double h = 0, n = 0;
       for (int f = 0; f < o.futures; ++f) {
-        auto cls = read_scene(m, frames[size_t(g * o.futures + f)]);  // [F, 4]
-        for (int64_t k = 0; k < F; ++k, ++n) {
-          const int64_t c = cls[k][t.attribute].item<int64_t>();
-          h += c == want;
-          got[size_t(c)] += 1;
-        }
+        auto read = read_scene(m, frames[size_t(g * o.futures + f)]).select(1, t.attribute).cpu();  // [F]
+        auto cls = read.accessor<int64_t, 1>();
+        for (int64_t k = 0; k < F; ++k) got[size_t(cls[k])] += 1;
       }
+      const double n = double(o.futures * F), h = got[size_t(want)];
       per[t.value] = h / n;
       read_as[t.value] = nlohmann::json::object();
       for (size_t c = 0; c < names.size(); ++c)
