@@ -9,6 +9,7 @@
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/probe.h"
 #include "gaia/probe/trainer.h"
+#include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "test_util.h"
 
@@ -152,4 +153,85 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
   r = test::run_gaia("probe eval " + q(d / "ds" / "dataset.json") + " " + q(d / "ds") + tiny);
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("dataset.json"), std::string::npos) << r.output;
+}
+
+// Frames read through the tokenizer (--tokenizer): the flagged examples are the tokenizer's reconstruction of the
+// frame, the others the raw frame; training with a decoded share resumes exactly and validates on decoded frames
+// too; bad shares and a tokenizer of another frame size fail with one line naming them.
+TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
+  test::TempDir d;
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2";
+  auto r = test::run_gaia("synth --episodes 6 --seconds 2 --size 32x64 --seed 5 --out " + q(d / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("tokenizer train " + q(d / "ds") + tiny + " --steps 6 --out " + q(d / "tok"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fs::path tok_file = d / "tok" / "tokenizer.safetensors";
+
+  data::Dataset ds(d / "ds");
+  auto set = data::frame_set(ds, ds.ids(), 0, 4);
+  ASSERT_EQ(set.frames.size(), 4u);
+  auto tok = probe::load_through(tok_file, set.episodes[0]->frame_bgr(0), d / "ds", torch::kCPU);
+  const probe::Span one;
+  auto x = probe::inputs(set.episodes, set.frames, one, {&tok, torch::kCPU}, {true, false, true, false});
+  for (size_t i = 0; i < 4; ++i) {
+    const auto& e = set.frames[i];
+    const cv::Mat raw = set.episodes[e.episode]->frame_bgr(e.frame);
+    const cv::Mat back = tokenizer::decode_tokens(tok, tokenizer::encode_frames(tok, {raw}, torch::kCPU), torch::kCPU)[0];
+    const auto want = probe::probe_input({i % 2 == 0 ? back : raw});
+    EXPECT_TRUE(torch::equal(x[int64_t(i)], want)) << i;
+    // The tokenizer changes the frame: the flag is what decides, not a no-op.
+    EXPECT_GT((probe::probe_input({back}) - probe::probe_input({raw})).abs().mean().item<double>(), 1e-3) << i;
+  }
+  // Every example through it when no flags are given (validation and `probe eval`).
+  auto all = probe::inputs(set.episodes, set.frames, one, {&tok, torch::kCPU});
+  EXPECT_TRUE(torch::equal(all[0], x[0]));
+  EXPECT_TRUE(torch::equal(all[2], x[2]));
+  EXPECT_FALSE(torch::equal(all[1], x[1]));
+
+  const std::string base = "probe train scene " + q(d / "ds") + tiny + " --tokenizer " + q(tok_file) +
+                           " --decoded-share 0.5 --steps 8 --batch 8 --val-every 4";
+  r = test::run_gaia(base + " --out " + q(d / "a"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(base + " --stop-after 4 --out " + q(d / "b"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(base + " --out " + q(d / "b"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fs::path w = "probe-scene.safetensors";
+  SafetensorsFile a(d / "a" / w), b(d / "b" / w);
+  for (const auto& n : a.names()) ASSERT_TRUE(torch::equal(tensor_from_view(a.get(n)), tensor_from_view(b.get(n)))) << n;
+  EXPECT_EQ(a.metadata().at("gaia.probe.decoded_share"), "0.5");
+  std::istringstream in(read_file(d / "a" / "metrics.jsonl"));
+  int validated = 0;
+  for (std::string line; std::getline(in, line);) {
+    auto j = nlohmann::json::parse(line);
+    if (j["val"].is_null() || j["val"].empty()) continue;
+    ++validated;
+    const double acc = j["val"]["decoded"]["weather_accuracy"].get<double>();
+    EXPECT_GE(acc, 0.0);
+    EXPECT_LE(acc, 1.0);
+  }
+  EXPECT_EQ(validated, 2);
+  // Without --tokenizer the file says no frame was decoded.
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 2 --batch 4 --out " + q(d / "raw"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(SafetensorsFile(d / "raw" / w).metadata().at("gaia.probe.decoded_share"), "0");
+
+  r = test::run_gaia("probe eval " + q(d / "a" / w) + " " + q(d / "ds") + tiny + " --examples 16 --tokenizer " + q(tok_file));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(j["decoded"]["examples"].get<int>(), j["examples"].get<int>());
+  EXPECT_TRUE(j["decoded"].contains("weather_accuracy")) << r.output;
+
+  r = test::run_gaia(base + " --decoded-share 1.5 --out " + q(d / "c"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--decoded-share"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "c" / w));
+  r = test::run_gaia("synth --episodes 2 --seconds 1 --size 24x48 --seed 5 --out " + q(d / "small"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe train scene " + q(d / "small") + tiny + " --steps 2 --tokenizer " + q(tok_file) + " --out " +
+                     q(d / "e"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("tokenizer.safetensors"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("32x64"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "e" / w));
 }

@@ -7,6 +7,7 @@
 #include "gaia/core/progress.h"
 #include "gaia/data/geofence.h"
 #include "gaia/probe/trainer.h"
+#include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::app {
@@ -28,6 +29,10 @@ void register_probe(CLI::App& app) {
                     "shows in 2; `gaia eval` then needs at least 3 generated frames)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_option("--tokenizer", o->tokenizer,
+                    "read a share of the training frames through this tokenizer (encoded and decoded), as `gaia eval` "
+                    "reads generated frames; validation then also scores decoded held-out frames");
+    cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
@@ -39,6 +44,8 @@ void register_probe(CLI::App& app) {
       opt.out = flags->out;
       if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch must be >= 1");
       if (opt.frames < 0) fail("gaia probe train: --frames must be >= 1, got {}", opt.frames);
+      if (!(opt.decoded_share >= 0 && opt.decoded_share <= 1))
+        fail("gaia probe train: --decoded-share must be in [0, 1], got {}", opt.decoded_share);
       std::unique_ptr<ProgressBar> bar;
       auto r = probe::train_probe(
           c, opt,
@@ -59,7 +66,11 @@ void register_probe(CLI::App& app) {
     auto n = std::make_shared<int>(512);
     cmd->add_option("WEIGHTS", *weights, "probe weights (probe-KIND.safetensors)")->required();
     cmd->add_option("DATASET", *dataset, "episode dataset with labels")->required();
+    auto tok_path = std::make_shared<std::string>();
     cmd->add_option("--examples", *n, "held-out examples (evenly spaced)");
+    cmd->add_option("--tokenizer", *tok_path,
+                    "also score the frames read through this tokenizer (encoded and decoded), as `gaia eval` reads "
+                    "generated frames (key \"decoded\")");
     add_shared_flags(cmd, flags.get(), "output directory (probe_eval.json); default: print only");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
@@ -69,8 +80,14 @@ void register_probe(CLI::App& app) {
       data::Dataset ds(*dataset);
       const probe::Span span = probe::span_of(net, c);
       auto set = data::held_out_frames(ds, c.run.seed, span.reach(), std::max(1, *n));
-      auto j = probe::score(net->kind, probe::predict(net, set, span, dev),
-                            probe::targets(net->kind, set.episodes, set.frames, span));
+      const auto y = probe::targets(net->kind, set.episodes, set.frames, span);
+      auto j = probe::score(net->kind, probe::predict(net, set, span, dev), y);
+      if (!tok_path->empty()) {
+        if (set.frames.empty()) fail("{}: no held-out frames to score", *dataset);
+        const auto& e = set.frames[0];
+        auto tok = probe::load_through(*tok_path, set.episodes.at(e.episode)->frame_bgr(e.frame), *dataset, dev);
+        j["decoded"] = probe::score(net->kind, probe::predict(net, set, span, dev, {&tok, dev}), y);
+      }
       j["frames"] = net->frames;
       if (!flags->out.empty()) {
         fs::create_directories(flags->out);

@@ -8,6 +8,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/tokenizer/autoencoder.h"
+#include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
@@ -35,14 +36,36 @@ Span span_of(const ProbeNet& net, const Config& c) {
 }
 
 torch::Tensor inputs(const std::vector<std::unique_ptr<data::Episode>>& eps, const std::vector<Example>& ex,
-                     const Span& span) {
-  std::vector<torch::Tensor> xs;
-  for (const auto& e : ex) {
+                     const Span& span, const Through& through, const std::vector<bool>& decoded) {
+  std::vector<std::vector<cv::Mat>> frames;
+  std::vector<cv::Mat> coded;  // the frames to read through the tokenizer, in order
+  for (size_t i = 0; i < ex.size(); ++i) {
+    const auto& e = ex[i];
     std::vector<cv::Mat> f;
     for (int k = 0; k < span.frames; ++k) f.push_back(eps.at(e.episode)->frame_bgr(e.frame + int64_t(k) * span.stride));
-    xs.push_back(probe_input(f));
+    if (through.tokenizer && (decoded.empty() || decoded.at(i))) coded.insert(coded.end(), f.begin(), f.end());
+    frames.push_back(std::move(f));
   }
+  if (!coded.empty()) {
+    auto back = tokenizer::decode_tokens(*through.tokenizer, tokenizer::encode_frames(*through.tokenizer, coded, through.device),
+                                         through.device);
+    size_t next = 0;
+    for (size_t i = 0; i < ex.size(); ++i)
+      if (decoded.empty() || decoded.at(i))
+        for (auto& f : frames[i]) f = back[next++];
+  }
+  std::vector<torch::Tensor> xs;
+  for (const auto& f : frames) xs.push_back(probe_input(f));
   return torch::stack(xs);
+}
+
+tokenizer::ImageTokenizer load_through(const fs::path& tokenizer, const cv::Mat& sample, const fs::path& dataset,
+                                       const torch::Device& dev) {
+  auto tok = tokenizer::load_tokenizer(tokenizer, dev);
+  if (sample.rows != tok->height || sample.cols != tok->width)
+    fail("{}: the tokenizer reads {}x{} frames, {} has {}x{}", tokenizer.string(), tok->height, tok->width,
+         dataset.string(), sample.rows, sample.cols);
+  return tok;
 }
 
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
@@ -81,14 +104,15 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
   return torch::tensor(v, torch::kLong).view({int64_t(ex.size()), 4});
 }
 
-torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev) {
+torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev,
+                      const Through& through) {
   torch::NoGradGuard ng;
   const bool was_training = net->is_training();
   net->eval();
   std::vector<torch::Tensor> preds;
   for (size_t i = 0; i < s.frames.size(); i += 64) {
     std::vector<Example> part(s.frames.begin() + long(i), s.frames.begin() + long(std::min(s.frames.size(), i + 64)));
-    preds.push_back(net->forward(inputs(s.episodes, part, span).to(dev)).cpu());
+    preds.push_back(net->forward(inputs(s.episodes, part, span, through).to(dev)).cpu());
   }
   net->train(was_training);
   return torch::cat(preds);
@@ -161,6 +185,14 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   const auto& train_ex = train.frames;
   if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
   if (val.frames.empty() && on_note) on_note("no held-out episodes: validation skipped");
+  if (!(opt.decoded_share >= 0 && opt.decoded_share <= 1))
+    fail("probe training: decoded_share must be in [0, 1], got {}", opt.decoded_share);
+  tokenizer::ImageTokenizer tok{nullptr};
+  Through through;
+  if (!opt.tokenizer.empty()) {
+    tok = load_through(opt.tokenizer, train_eps.at(train_ex[0].episode)->frame_bgr(train_ex[0].frame), opt.dataset, dev);
+    through = {&tok, dev};
+  }
 
   net->to(dev);
   auto optim = train::make_adamw(net->parameters(), opt.lr, 1e-4, 0.9, 0.999);
@@ -178,7 +210,10 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   auto validate = [&] {
     nlohmann::json v;
     if (val.frames.empty()) return v;
-    return score(opt.kind, predict(net, val, span, dev), targets(opt.kind, val.episodes, val.frames, span));
+    const auto y = targets(opt.kind, val.episodes, val.frames, span);
+    v = score(opt.kind, predict(net, val, span, dev), y);
+    if (through.tokenizer) v["decoded"] = score(opt.kind, predict(net, val, span, dev, through), y);
+    return v;
   };
   net->train();
   while (step < opt.steps) {
@@ -186,7 +221,12 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     std::uniform_int_distribution<size_t> pick(0, train_ex.size() - 1);
     std::vector<Example> b;
     for (int i = 0; i < opt.batch; ++i) b.push_back(train_ex[pick(rng)]);
-    auto x = inputs(train_eps, b, span).to(dev);
+    std::vector<bool> decoded;
+    if (through.tokenizer) {
+      std::bernoulli_distribution coin(opt.decoded_share);
+      for (int i = 0; i < opt.batch; ++i) decoded.push_back(coin(rng));
+    }
+    auto x = inputs(train_eps, b, span, through, decoded).to(dev);
     // Flip augmentation would swap left and right, which is the label of the dynamics probe: none here.
     auto y = targets(opt.kind, train_eps, b, span).to(dev);
     const double lr = sched(step);
@@ -208,7 +248,8 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     result.weights = opt.out / ("probe-" + to_string(opt.kind) + ".safetensors");
     save_module(*net, result.weights,
                 {{"gaia.component", "probe"}, {"gaia.probe.kind", to_string(opt.kind)},
-                 {"gaia.probe.frames", std::to_string(net->frames)}, {"gaia.probe.val", result.last_val.dump()}});
+                 {"gaia.probe.frames", std::to_string(net->frames)}, {"gaia.probe.val", result.last_val.dump()},
+                 {"gaia.probe.decoded_share", fmt::format("{}", through.tokenizer ? opt.decoded_share : 0.0)}});
   }
   return result;
 }

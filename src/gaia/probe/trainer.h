@@ -10,6 +10,7 @@
 #include "gaia/data/episode.h"
 #include "gaia/data/frame_set.h"
 #include "gaia/probe/probe.h"
+#include "gaia/tokenizer/autoencoder.h"
 
 namespace gaia::probe {
 
@@ -31,11 +32,22 @@ Span span_of(const ProbeNet& net, const Config& c);
 // [N, 4] int64 class ids (weather, time, light, lead close). Errors name the episode when a label is missing.
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
                       const std::vector<Example>& ex, const Span& span);
+// Inputs [N, 3 * frames, H, W] of examples; with `through` (a tokenizer) the examples whose `decoded` flag is set
+// (all when `decoded` is empty) are first encoded and decoded by it, the way `gaia eval` reads generated frames.
+struct Through {
+  tokenizer::ImageTokenizer* tokenizer = nullptr;
+  torch::Device device = torch::kCPU;
+};
 torch::Tensor inputs(const std::vector<std::unique_ptr<data::Episode>>& eps, const std::vector<Example>& ex,
-                     const Span& span);
+                     const Span& span, const Through& through = {}, const std::vector<bool>& decoded = {});
+// The tokenizer for `Through`; fails naming both paths when it reads another frame size than `sample`'s.
+tokenizer::ImageTokenizer load_through(const fs::path& tokenizer, const cv::Mat& sample, const fs::path& dataset,
+                                       const torch::Device& dev);
 
-// Network outputs for a set, in batches (no gradients) -> [N, outputs] on the CPU.
-torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev);
+// Network outputs for a set, in batches (no gradients) -> [N, outputs] on the CPU; every frame through the
+// tokenizer when `through` has one.
+torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev,
+                      const Through& through = {});
 
 // Metrics of predictions against targets: dynamics -> speed / curvature MAE (m/s, 1/m), Spearman, steering sign
 // accuracy (|curvature| >= 0.002 1/m); scene -> accuracy of each attribute.
@@ -47,6 +59,11 @@ struct ProbeTrainOptions {
   int frames = 0;          // frames an example reads: 0 = kDynamicsFrames for dynamics, 1 for scene
   int steps = 1500, batch = 32, val_every = 250, val_examples = 512, stop_after = -1;
   double lr = 1e-3;
+  // A share of each batch read through this tokenizer (encoded, quantised, decoded): generated frames reach the
+  // probe through its decoder, and a probe trained on raw frames alone misses cues the decoder redraws (real rain
+  // read through it at 73%; docs/evaluation.md). Validation then also scores decoded held-out frames.
+  fs::path tokenizer;
+  double decoded_share = 0.5;
 };
 
 struct ProbeTrainResult {
