@@ -226,6 +226,10 @@ TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--decoded-share"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "c" / w));
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 2 --decoded-share 0.5 --out " + q(d / "f"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--tokenizer"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "f"));
   r = test::run_gaia("synth --episodes 2 --seconds 1 --size 24x48 --seed 5 --out " + q(d / "small"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = test::run_gaia("probe train scene " + q(d / "small") + tiny + " --steps 2 --tokenizer " + q(tok_file) + " --out " +

@@ -29,10 +29,12 @@ void register_probe(CLI::App& app) {
                     "shows in 2; `gaia eval` then needs at least 3 generated frames)");
     cmd->add_option("--val-every", o->val_every, "steps between validations");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
-    cmd->add_option("--tokenizer", o->tokenizer,
-                    "read a share of the training frames through this tokenizer (encoded and decoded), as `gaia eval` "
-                    "reads generated frames; validation then also scores decoded held-out frames");
-    cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)");
+    auto* through = cmd->add_option("--tokenizer", o->tokenizer,
+                                    "read a share of the training frames through this tokenizer (encoded and decoded), "
+                                    "as `gaia eval` reads generated frames; validation then also scores decoded "
+                                    "held-out frames");
+    cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)")
+        ->needs(through);
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
