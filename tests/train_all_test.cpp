@@ -1,5 +1,7 @@
 // gaia train-all on the tiny config with a handful of steps per stage: every stage runs as its own gaia process,
 // the fp16 copies land in --ship, and a second run finds every stage done and skips it (resumable recipe).
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 #include <torch/torch.h>
@@ -84,6 +86,14 @@ TEST(TrainAll, RunsEveryStageShipsAndResumes) {
   EXPECT_NE(log[12]["command"].get<std::string>().find("world calibrate"), std::string::npos);
   EXPECT_NE(log[12]["command"].get<std::string>().find("world-cf2"), std::string::npos);
   EXPECT_NE(log[12]["command"].get<std::string>().find("--without-meta synth_wander --without-meta replay_of"), std::string::npos);
+  // The scene probe reads half of its frames through the final tokenizer (the refined one), as gaia eval does.
+  const auto probe_stage = std::find_if(log.begin(), log.end(), [](const nlohmann::json& e) { return e["stage"] == "probe-scene"; });
+  ASSERT_NE(probe_stage, log.end());
+  const std::string probe_cmd = (*probe_stage)["command"].get<std::string>();
+  EXPECT_NE(probe_cmd.find("--tokenizer " + (d / "runs" / "tokenizer-refine" / "tokenizer.safetensors").string()),
+            std::string::npos) << probe_cmd;
+  EXPECT_NE(probe_cmd.find("--decoded-share 0.5"), std::string::npos) << probe_cmd;
+  EXPECT_EQ(SafetensorsFile(d / "models" / "probe-scene.safetensors").metadata().at("gaia.probe.decoded_share"), "0.5");
   world::WorldInfo shipped;
   world::load_world(d / "models" / "world.safetensors", torch::kCPU, &shipped);
   EXPECT_NE(shipped.config.world.copy_bias, 0.0);

@@ -46,7 +46,7 @@ void register_train_all(CLI::App& app) {
   // each approximates).
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
-        probe_scene = 1500, probe_dynamics = 4000;
+        probe_scene = 2500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
@@ -132,7 +132,10 @@ void register_train_all(CLI::App& app) {
          with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
                (out / "decoder").string()}),
          decoder},
-        {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--out", (out / "probe-scene").string()}),
+        // Half of its frames read through the final tokenizer, as gaia eval reads generated frames (MODEL_CARD.md,
+        // "Probes").
+        {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--tokenizer",
+                              tok, "--decoded-share", "0.5", "--out", (out / "probe-scene").string()}),
          out / "probe-scene" / "probe-scene.safetensors"},
         {"probe-dynamics",
          with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
