@@ -19,6 +19,9 @@
 #include "gaia/synth/synth.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
+#include "gaia/world/batch.h"
+#include "gaia/world/io.h"
+#include "gaia/world/rollout.h"
 
 namespace gaia::app {
 
@@ -124,11 +127,22 @@ void register_decoder(CLI::App& app) {
     cmd->add_option("--token-fps", eo->token_fps,
                     "rate of the tokens the video decoder gets: 6.25 (the world model's; upsampled to 25 Hz), 12.5, "
                     "or 25 (every frame's own, as the tokenizer decoder gets them)");
+    auto world_path = std::make_shared<std::string>();
+    auto prompt_frames = std::make_shared<int>(3);
+    cmd->add_option("--world", *world_path,
+                    "decode world-model rollouts instead of the true tokens: the clip's first --prompt-frames token "
+                    "frames and its recorded actions prompt the world model (top-k 50, no guidance), both decoders "
+                    "decode what it generates");
+    cmd->add_option("--prompt-frames", *prompt_frames, "with --world: true token frames before the generated ones")
+        ->needs(cmd->get_option("--world"));
     add_shared_flags(cmd, flags.get(), "output directory (eval.json)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);
       apply_threads(run);
       if (flags->out.empty()) fail("gaia decoder eval: --out DIR is required");
+      if (!world_path->empty() && (*prompt_frames < 1 || *prompt_frames >= eo->token_frames))
+        fail("gaia decoder eval: --prompt-frames must be in [1, --token-frames - 1] = [1, {}], got {}",
+             eo->token_frames - 1, *prompt_frames);
       auto dev = parse_device(run.run.device);
       Config dc;
       auto model = decoder::load_decoder(*weights, dev, &dc);
@@ -140,6 +154,31 @@ void register_decoder(CLI::App& app) {
       decoder::DecoderEvalOptions o = *eo;
       o.steps = parse_steps(*steps);
       o.seed = uint64_t(run.run.seed);
+      world::WorldModel wm{nullptr};
+      if (!world_path->empty()) {
+        world::WorldInfo info;
+        wm = world::load_world(*world_path, dev, &info);
+        const int64_t gh = t->height / t->cfg.downsample, gw = t->width / t->cfg.downsample;
+        if (info.K != t->cfg.codebook_size || info.grid_h != gh || info.grid_w != gw)
+          fail("{}: the world model works on {}x{} grids of K = {} tokens; this tokenizer gives {}x{}, K = {}",
+               *world_path, info.grid_h, info.grid_w, info.K, gh, gw, t->cfg.codebook_size);
+        auto clip_no = std::make_shared<uint64_t>(0);
+        const int64_t P = *prompt_frames;
+        o.generate = [wm, P, clip_no, seed = o.seed](const torch::Tensor& tokens, const torch::Tensor& actions) {
+          const int64_t N = tokens.size(0), h = tokens.size(1), w = tokens.size(2);
+          world::RolloutPrompt p;
+          p.tokens = tokens.slice(0, 0, P).reshape({P, h * w});
+          auto a = actions.clone();  // the world model's action inputs are normalised (batch.h)
+          a.select(1, 0).div_(world::kSpeedScale);
+          a.select(1, 1).div_(world::kCurvatureScale);
+          p.actions = a;
+          world::RolloutOptions ro;  // the paper's sampling: top-k, k = 50 (§5.1); no guidance
+          ro.frames = int(N - P);
+          ro.seed = seed + (*clip_no)++;  // each clip its own draw, the same on every run
+          auto m = wm;
+          return world::rollout(m, p, ro).tokens[0].view({N, h, w});
+        };
+      }
       std::unique_ptr<ProgressBar> bar;
       auto j = decoder::evaluate_decoder(dc, model, t, *dataset, o, [&](int d, int total) {
         // Made at the first report, which comes after a window's work: rate and ETA count from there.
@@ -147,6 +186,7 @@ void register_decoder(CLI::App& app) {
         bar->update(d);
       });
       if (bar) bar->finish();
+      if (!world_path->empty()) j["world"] = {{"weights", *world_path}, {"prompt_frames", *prompt_frames}};
       fs::create_directories(flags->out);
       write_file_atomic(fs::path(flags->out) / "eval.json", j.dump(2) + "\n");
       std::printf("%s\n", j.dump(2).c_str());

@@ -75,6 +75,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   // The 25 Hz frames that get tokens: every 4th, 2nd or each one.
   const int stride = o.token_fps == 6.25 ? 4 : o.token_fps == 12.5 ? 2 : o.token_fps == 25.0 ? 1 : 0;
   if (stride == 0) fail("decoder eval: --token-fps must be 6.25, 12.5 or 25, got {}", o.token_fps);
+  if (o.generate && stride != 4) fail("decoder eval: generated tokens come at 6.25 Hz; --token-fps must be 6.25");
   const int windows = count_windows((M - 1) / stride + 1, cfg.decoder.frames, o.token_fps, 25.0);
   int total = 0, done = 0;
   for (int s : o.steps) total += int(refs.size()) * windows * s;
@@ -88,6 +89,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   out["noise_scale"] = d.sample.noise_scale;
   out["start_time"] = d.sample.start_time;
   out["token_fps"] = o.token_fps;
+  out["tokens"] = o.generate ? "generated" : "true";
   std::vector<double> tok_key, tok_all, gt_key_change, gt_all_change, tok_key_change, tok_all_change;
   std::vector<double> tok_key_err, tok_all_err, blend_all, blend_all_change, blend_all_err;
   std::vector<double> gt_edges, tok_edges, blend_edges;  // edge_energy over the 25 Hz frames
@@ -100,6 +102,23 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     auto gt_key = gt.index_select(0, key);
     auto tok_dec = clip.cond[0];  // the tokenizer decoder on every frame's own tokens
     auto tok_dec_key = tok_dec.index_select(0, key);
+    auto tokens_key = clip.tokens[0].index_select(0, key);  // [N, h, w]
+    if (o.generate) {  // both decoders get the generated token frames; 25 Hz has no tokens of its own then
+      auto acts = torch::empty({N, 2}, torch::kFloat32);
+      const auto& ep = *episodes[refs[c].episode];
+      for (int k = 0; k < N; ++k) {
+        const int64_t f = refs[c].frames[size_t(4 * k)];
+        acts[k][0] = ep.speed(f);
+        acts[k][1] = ep.curvature(f);
+      }
+      auto gen = o.generate(tokens_key, acts).to(dev);
+      if (gen.sizes() != tokens_key.sizes())
+        fail("decoder eval: the token generator gave {} for a clip of {}", shape_str(gen.sizes().vec()),
+             shape_str(tokens_key.sizes().vec()));
+      tokens_key = gen;
+      tok_dec_key = tok->decode_tokens(gen).clamp(-1, 1);
+      tok_dec = blend_to_rate(tok_dec_key, 4);
+    }
     tok_key.push_back(psnr_pm1(tok_dec_key, gt_key));
     tok_all.push_back(psnr_pm1(tok_dec, gt));
     gt_key_change.push_back(temporal_change(gt_key));
@@ -118,6 +137,10 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     auto given = torch::arange(0, M, stride, torch::kLong).to(dev);  // the frames whose tokens the decoder gets
     auto tokens = clip.tokens.index_select(1, given);                  // [1, (M - 1) / stride + 1, h, w]
     auto cond = model->cfg.cond_image ? clip.cond.index_select(1, given) : torch::Tensor();
+    if (o.generate) {
+      tokens = tokens_key.unsqueeze(0);
+      if (cond.defined()) cond = tok_dec_key.unsqueeze(0);
+    }
     for (int s : o.steps) {
       d.sample.steps = s;
       auto t0 = std::chrono::steady_clock::now();
@@ -141,17 +164,30 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     for (double x : v) s += x;
     return v.empty() ? 0.0 : s / double(v.size());
   };
+  // Each clip's flicker (its change minus the truth's over the same frames): whether a decoder is lower on most
+  // clips or on a few.
+  auto per_clip = [](const std::vector<double>& change, const std::vector<double>& truth) {
+    std::vector<double> f;
+    for (size_t i = 0; i < change.size(); ++i) f.push_back(change[i] - truth[i]);
+    return f;
+  };
   const double gk = mean(gt_key_change), ga = mean(gt_all_change);
   const double ge = mean(gt_edges);
   out["ground_truth"] = {{"change_6.25hz", gk}, {"change_25hz", ga}, {"edge_energy", ge}};
-  out["tokenizer_decoder"] = {{"psnr_6.25hz", mean(tok_key)}, {"psnr_25hz", mean(tok_all)},
-                              {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(tok_all_change) - ga},
-                              {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(tok_all_err)},
-                              {"sharpness", mean(tok_edges) / ge},
-                              {"note", "frame by frame from every frame's own tokens (at 25 Hz it gets 4x the tokens)"}};
+  if (o.generate)
+    out["psnr_note"] = "generated frames after the prompt: PSNR is against the recorded future, one of many";
+  else
+    out["tokenizer_decoder"] = {
+        {"psnr_6.25hz", mean(tok_key)}, {"psnr_25hz", mean(tok_all)},
+        {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(tok_all_change) - ga},
+        {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(tok_all_err)},
+        {"sharpness", mean(tok_edges) / ge},
+        {"note", "frame by frame from every frame's own tokens (at 25 Hz it gets 4x the tokens)"}};
   out["tokenizer_decoder_blended"] = {
       {"psnr_6.25hz", mean(tok_key)},      {"psnr_25hz", mean(blend_all)},
       {"flicker_6.25hz", mean(tok_key_change) - gk}, {"flicker_25hz", mean(blend_all_change) - ga},
+      {"flicker_6.25hz_per_clip", per_clip(tok_key_change, gt_key_change)},
+      {"flicker_25hz_per_clip", per_clip(blend_all_change, gt_all_change)},
       {"temporal_error_6.25hz", mean(tok_key_err)}, {"temporal_error_25hz", mean(blend_all_err)},
       {"sharpness", mean(blend_edges) / ge},
       {"note", "frame by frame from the 6.25 Hz tokens, linearly blended to 25 Hz (the video decoder's information)"}};
@@ -163,6 +199,8 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
         {"psnr_25hz", mean(dif_all[s])},
         {"flicker_6.25hz", mean(dif_key_change[s]) - gk},
         {"flicker_25hz", mean(dif_all_change[s]) - ga},
+        {"flicker_6.25hz_per_clip", per_clip(dif_key_change[s], gt_key_change)},
+        {"flicker_25hz_per_clip", per_clip(dif_all_change[s], gt_all_change)},
         {"temporal_error_6.25hz", mean(dif_key_err[s])},
         {"temporal_error_25hz", mean(dif_all_err[s])},
         {"sharpness", mean(dif_edges[s]) / ge},  // edge energy at 25 Hz over the ground truth's

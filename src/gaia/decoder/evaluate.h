@@ -33,6 +33,11 @@ torch::Tensor blend_to_rate(const torch::Tensor& key, int factor);
 // PSNR between images in [-1, 1] (the first is clamped), on the [0, 1] scale.
 double psnr_pm1(const torch::Tensor& a, const torch::Tensor& b);
 
+// Tokens a world model generates for a clip: the clip's own token frames [N, h, w] at 6.25 Hz and the recorded
+// (speed m/s, curvature 1/m) at each [N, 2] -> [N, h, w], the frames after the prompt replaced by generated ones.
+// The paper's reason for a video decoder is decoding such tokens (§2.4), which need not agree from frame to frame.
+using TokenGenerator = std::function<torch::Tensor(const torch::Tensor& tokens, const torch::Tensor& actions)>;
+
 struct DecoderEvalOptions {
   int clips = 2;                   // held-out clips
   int token_frames = 8;            // N token frames at 6.25 Hz per clip (-> 4N - 3 frames at 25 Hz)
@@ -41,6 +46,9 @@ struct DecoderEvalOptions {
   // §5.2), 12.5, or 25 (every frame's own tokens, as the tokenizer decoder gets them at 25 Hz).
   double token_fps = 6.25;
   uint64_t seed = 0;
+  // Set: both decoders decode generated tokens instead of the true ones (token_fps must be 6.25). PSNR is then
+  // against the recorded future, one of many; flicker still compares each decoder's change with the truth's.
+  TokenGenerator generate;
 };
 
 nlohmann::json evaluate_decoder(const Config& decoder_config, VideoUNet& model, tokenizer::ImageTokenizer& tok,
