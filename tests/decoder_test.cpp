@@ -88,6 +88,31 @@ TEST(DecoderDiffusion, LossIsPaperWeightedOverPredictedFramesOnly) {
   EXPECT_NEAR(v_loss(vp, vt, w, 0.1, 1.0).item<double>(), 0.1 * 2 + 1.0 * 4, 1e-6);
 }
 
+// decoder.w_temporal's term: the change of the v error between consecutive predicted frames. An error that is the
+// same in every frame costs nothing however large; one that alternates costs its full swing; pairs that touch a
+// context frame (weight 0) do not count.
+TEST(DecoderDiffusion, TemporalLossCountsOnlyErrorsThatChange) {
+  auto vt = torch::randn({2, 4, 3, 4, 4});
+  auto steady = vt + 0.7;  // the same error everywhere
+  auto w = torch::ones({2, 4});
+  EXPECT_NEAR(temporal_v_loss(steady, vt, w).item<double>(), 0.0, 1e-6);
+  EXPECT_GT(v_loss(steady, vt, w, 0.1, 1.0).item<double>(), 0.5);  // v_loss does see it
+  auto sign = torch::tensor({1.0f, -1.0f, 1.0f, -1.0f}).view({1, 4, 1, 1, 1});
+  auto flicker = vt + 0.5 * sign;  // +0.5, -0.5, +0.5, -0.5: every step changes the error by 1
+  EXPECT_NEAR(temporal_v_loss(flicker, vt, w).item<double>(), 1.0, 1e-6);
+  // Frame 0 is context in every window: the pair (0, 1) drops out. Make that pair's change large; the rest 1.
+  auto jump = flicker.clone();
+  jump.select(1, 0).add_(100.0);
+  auto w_ctx = w.clone();
+  w_ctx.select(1, 0).zero_();
+  EXPECT_NEAR(temporal_v_loss(jump, vt, w_ctx).item<double>(), 1.0, 1e-5);
+  EXPECT_GT(temporal_v_loss(jump, vt, w).item<double>(), 30.0);
+  // One predicted frame: no pair, no loss.
+  auto one = torch::zeros({2, 4});
+  one.select(1, 2).fill_(1.0);
+  EXPECT_EQ(temporal_v_loss(flicker, vt, one).item<double>(), 0.0);
+}
+
 TEST(DecoderDiffusion, DdimWithAnalyticDenoiserMapsNoiseToTheDataDistribution) {
   // Data x ~ N(mu, s^2) per dimension. The exact denoiser is E[x | x_t] = mu + a s^2 (x_t - a mu) / (a^2 s^2 + g^2),
   // and the probability-flow ODE keeps xi = (x_t - a mu) / sqrt(a^2 s^2 + g^2) constant: DDIM with many steps must

@@ -152,6 +152,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(field("decoder.noise_scale", &v.noise_scale));
   f.push_back(field("decoder.start_time", &v.start_time));
   f.push_back(field("decoder.train_max_time", &v.train_max_time));
+  f.push_back(field("decoder.w_temporal", &v.w_temporal));
   f.push_back(field("decoder.w_l1", &v.w_l1));
   f.push_back(field("decoder.w_l2", &v.w_l2));
   f.push_back(field("decoder.ema_decay", &v.ema_decay));
@@ -264,6 +265,7 @@ void Config::validate() const {
   need(decoder.noise_scale >= 0 && decoder.noise_scale <= 1, "decoder.noise_scale must be in [0, 1]");
   need(decoder.start_time > 0 && decoder.start_time <= 1, "decoder.start_time must be in (0, 1]");
   need(decoder.train_max_time > 0 && decoder.train_max_time <= 1, "decoder.train_max_time must be in (0, 1]");
+  need(decoder.w_temporal >= 0, "decoder.w_temporal must be >= 0");
   need(decoder.start_time == 1 || decoder.cond_image,
        "decoder.start_time < 1 needs decoder.cond_image (the coarse frame the sampler starts from)");
 }

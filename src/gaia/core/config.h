@@ -139,6 +139,10 @@ struct DecoderConfig {
   // training on the levels it is sampled at.
   double train_max_time = 1.0;
   double w_l1 = 0.1, w_l2 = 1.0;  // paper §4.3
+  // Weight of a temporal-consistency term (not in the paper; 0 = its loss): diffusion.h temporal_v_loss, the change
+  // of the v error between consecutive predicted frames. An error that stays put costs less than one that changes
+  // from frame to frame, which is what the eye sees as flicker.
+  double w_temporal = 0.0;
   double ema_decay = 0.999;      // paper §4.3
   // paper §4.3 optimiser: AdamW lr 5e-5, wd 0.01, betas (0.9, 0.99), clip 1.0; cosine to 1e-6 (batch 64, 300k
   // steps). The CPU recipe trains 1300 steps at batch 2 (~2.5 h on one core), so it uses a 4x higher rate with

@@ -22,6 +22,14 @@ torch::Tensor v_loss(const torch::Tensor& v_pred, const torch::Tensor& v_true, c
   return (w * (w_l1 * l1 + w_l2 * l2)).sum() / denom;
 }
 
+torch::Tensor temporal_v_loss(const torch::Tensor& v_pred, const torch::Tensor& v_true, const torch::Tensor& weight) {
+  auto e = v_pred - v_true;                                                        // [B, T, C, H, W]
+  auto de = (e.slice(1, 1) - e.slice(1, 0, -1)).abs().flatten(2).mean(-1);         // [B, T - 1]
+  auto w = weight.to(v_pred.dtype());
+  auto pair = (w.slice(1, 1) > 0).logical_and(w.slice(1, 0, -1) > 0).to(v_pred.dtype());  // [B, T - 1]
+  return (pair * de).sum() / pair.sum().clamp_min(1.0);
+}
+
 torch::Tensor ddim_step(const torch::Tensor& xt, const torch::Tensor& v, const torch::Tensor& alpha_t,
                         const torch::Tensor& sigma_t, const torch::Tensor& alpha_s, const torch::Tensor& sigma_s) {
   auto x_hat = x_from_v(xt, v, alpha_t, sigma_t);

@@ -43,6 +43,11 @@ inline torch::Tensor eps_from_v(const torch::Tensor& xt, const torch::Tensor& v,
 // ([B, T], 1 = frame to predict, 0 = clean context frame that carries no loss).
 torch::Tensor v_loss(const torch::Tensor& v_pred, const torch::Tensor& v_true, const torch::Tensor& weight,
                      double w_l1, double w_l2);
+// Temporal consistency (an extension, config decoder.w_temporal): the mean |e[t+1] - e[t]| of the v error
+// e = v_pred - v_true over pairs of consecutive frames that are both predicted (weight > 0). With one noise level
+// per window the x0 error is -sigma_t e, so this is the flicker of the x0 estimate's error, up to sigma_t. 0 when
+// the error is the same in every frame; 0 for windows with fewer than two predicted frames.
+torch::Tensor temporal_v_loss(const torch::Tensor& v_pred, const torch::Tensor& v_true, const torch::Tensor& weight);
 
 // One deterministic DDIM step (Song et al. 2021, eta = 0) from time t to an earlier time s, given the model's v:
 //   x_hat = alpha_t x_t - sigma_t v,  eps_hat = sigma_t x_t + alpha_t v,  x_s = alpha_s x_hat + sigma_s eps_hat.

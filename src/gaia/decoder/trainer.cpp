@@ -213,7 +213,9 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
                              dc.interp_base);
     const double lr = sched(step);
     train::set_lr(*optim, lr);
-    auto loss = v_loss(model->forward(b.input), b.v_true, b.weight, dc.w_l1, dc.w_l2);
+    auto v_pred = model->forward(b.input);
+    auto loss = v_loss(v_pred, b.v_true, b.weight, dc.w_l1, dc.w_l2);
+    if (dc.w_temporal > 0) loss = loss + dc.w_temporal * temporal_v_loss(v_pred, b.v_true, b.weight);
     const double lv = loss.item<double>();
     if (!std::isfinite(lv)) fail("video decoder training diverged at step {} (loss is not finite)", step);
     optim->zero_grad();
