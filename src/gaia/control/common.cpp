@@ -17,18 +17,21 @@ Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::p
   Models m;
   m.dev = dev;
   m.world = world::load_world(world, dev, &m.info);
-  Config tc;
-  m.tok = tokenizer::load_tokenizer(tokenizer, dev, &tc);
-  const int64_t D = tc.tokenizer.downsample;
-  if (m.tok->height / D != m.info.grid_h || m.tok->width / D != m.info.grid_w || tc.tokenizer.codebook_size != m.info.K)
-    fail("{}: the tokenizer makes {}x{} tokens of K = {}, the world model {} takes {}x{} of K = {}", tokenizer.string(),
-         m.tok->height / D, m.tok->width / D, tc.tokenizer.codebook_size, world.string(), m.info.grid_h, m.info.grid_w,
-         m.info.K);
+  m.tok = tokenizer::load_tokenizer(tokenizer, dev);
+  check_tokenizer_fits(m.info, world, m.tok, tokenizer);
   m.dynamics = probe::load_probe(dynamics_probe, dev);
   if (m.dynamics->kind != probe::ProbeKind::kDynamics) fail("{}: not a dynamics probe", dynamics_probe.string());
   m.scene = probe::load_probe(scene_probe, dev);
   if (m.scene->kind != probe::ProbeKind::kScene) fail("{}: not a scene probe", scene_probe.string());
   return m;
+}
+
+void check_tokenizer_fits(const world::WorldInfo& info, const fs::path& world, const tokenizer::ImageTokenizer& tok,
+                          const fs::path& tokenizer) {
+  const int64_t D = tok->cfg.downsample, K = tok->cfg.codebook_size;
+  if (tok->height / D != info.grid_h || tok->width / D != info.grid_w || K != info.K)
+    fail("{}: the tokenizer makes {}x{} tokens of K = {}, the world model {} takes {}x{} of K = {}", tokenizer.string(),
+         tok->height / D, tok->width / D, K, world.string(), info.grid_h, info.grid_w, info.K);
 }
 
 torch::Tensor episode_tokens(const world::TokenDataset& ds, size_t e) {

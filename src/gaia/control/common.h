@@ -31,6 +31,9 @@ struct Models {
 // Loads the four weight files; errors name the file (and say when the tokenizer's grid is not the world model's).
 Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
                    const fs::path& scene_probe, const torch::Device& dev);
+// Fails, naming both files, unless the tokenizer makes the token grid and codebook the world model was trained on.
+void check_tokenizer_fits(const world::WorldInfo& info, const fs::path& world, const tokenizer::ImageTokenizer& tok,
+                          const fs::path& tokenizer);
 
 // `count` held-out prompts (split seed = the world model's training seed) of `frames` steps (at least `need` steps left in the episode from the start), spread over
 // the token dataset's validation episodes; the start skips the first second of an episode.

@@ -117,8 +117,9 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
              shape_str(tokens_key.sizes().vec()));
       tokens_key = gen;
       tok_dec_key = tok->decode_tokens(gen).clamp(-1, 1);
-      tok_dec = blend_to_rate(tok_dec_key, 4);
     }
+    auto blended = blend_to_rate(tok_dec_key, 4);  // the tokenizer decoder with the 6.25 Hz tokens only
+    if (o.generate) tok_dec = blended;
     tok_key.push_back(psnr_pm1(tok_dec_key, gt_key));
     tok_all.push_back(psnr_pm1(tok_dec, gt));
     gt_key_change.push_back(temporal_change(gt_key));
@@ -127,7 +128,6 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     tok_all_change.push_back(temporal_change(tok_dec));
     tok_key_err.push_back(temporal_error(tok_dec_key, gt_key));
     tok_all_err.push_back(temporal_error(tok_dec, gt));
-    auto blended = blend_to_rate(tok_dec_key, 4);  // the tokenizer decoder with the 6.25 Hz tokens only
     blend_all.push_back(psnr_pm1(blended, gt));
     blend_all_change.push_back(temporal_change(blended));
     blend_all_err.push_back(temporal_error(blended, gt));
