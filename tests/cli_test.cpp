@@ -180,7 +180,7 @@ TEST(Cli, ConvertSetsAStoredSamplingSetting) {
                         "--set world.d_model=64: only sampling settings");
   expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
                                        " --set world.temperature=0 --out " + bad.string()),
-                        "world.temperature must be > 0");
+                        "'world.temperature' = 0 is out of range: allowed (0, 100]");
   expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
                                        " --set world.top_k=many --out " + bad.string()),
                         "world.top_k");

@@ -4,6 +4,8 @@
 #include "gaia/plan/plan.h"
 #include "test_util.h"
 
+#include <cmath>
+
 using namespace gaia;
 
 namespace {
@@ -56,13 +58,70 @@ TEST(Config, UnknownKeysAndBadValuesNameTheKey) {
   k.set("world.guide_actions_within_top_k=false");
   EXPECT_FALSE(k.world.guide_actions_within_top_k);
   EXPECT_THROW(k.set("world.guide_actions_within_top_k=maybe"), Error);
-  k.set("world.top_k=0");
+  EXPECT_NE(test::error_of([&] { k.set("world.top_k=0"); }).find("world.top_k"), std::string::npos);
+  k.world.top_k = 0;  // a config built in code is range-checked by validate()
   EXPECT_NE(test::error_of([&] { k.validate(); }).find("world.top_k"), std::string::npos);
   Config r;
   r.set("world.p_action_replay=0.9");
   EXPECT_NO_THROW(r.validate());
-  r.set("world.p_action_replay=1.5");
+  EXPECT_NE(test::error_of([&] { r.set("world.p_action_replay=1.5"); }).find("world.p_action_replay"), std::string::npos);
+  r.world.p_action_replay = -0.5;  // inside the key's range [-1, 1], but only -1 or [0, 1] mean something
   EXPECT_NE(test::error_of([&] { r.validate(); }).find("world.p_action_replay"), std::string::npos);
+}
+
+// Every numeric key declares a range; a value just outside it is refused wherever it comes from (--set, YAML),
+// naming the key and the allowed range, and leaves the config as it was.
+TEST(Config, EveryKeyRangeIsCheckedAtItsEdges) {
+  Config probe;
+  int bounded = 0;
+  for (auto& f : probe.fields()) {
+    if (f.type != "int" && f.type != "float" && f.type != "int list") continue;
+    if (f.key == "run.seed") continue;
+    ASSERT_TRUE(f.range.bounded()) << f.key << " has no declared range";
+    ++bounded;
+    std::vector<double> outside;
+    if (std::isfinite(f.range.lo)) outside.push_back(f.range.lo_open ? f.range.lo : f.range.lo - 1);
+    if (std::isfinite(f.range.hi)) outside.push_back(f.range.hi_open ? f.range.hi : f.range.hi * 2 + 1);
+    for (double v : outside) {
+      Config c;
+      const std::string before = c.to_yaml();
+      std::string text = f.type == "float" ? fmt::format("{:g}", v) : fmt::format("{}", static_cast<long long>(v));
+      if (f.type == "int list") text = "[" + text + "]";
+      const std::string err = test::error_of([&] { c.set(f.key + "=" + text); });
+      EXPECT_NE(err.find(f.key), std::string::npos) << f.key << "=" << text << " accepted";
+      EXPECT_NE(err.find(f.range.str()), std::string::npos) << err;
+      EXPECT_EQ(c.to_yaml(), before) << f.key << ": a refused value changed the config";
+      test::TempDir dir;
+      const auto dot = f.key.find('.');
+      write_file_atomic(dir / "c.yaml", f.key.substr(0, dot) + ":\n  " + f.key.substr(dot + 1) + ": " + text + "\n");
+      const std::string file_err = test::error_of([&] { Config::load(dir / "c.yaml"); });
+      EXPECT_NE(file_err.find("c.yaml:2"), std::string::npos) << file_err;
+      EXPECT_NE(file_err.find(f.key), std::string::npos) << file_err;
+    }
+  }
+  EXPECT_GT(bounded, 90);
+  // Head counts of 0 used to divide by zero in validate() itself.
+  Config heads;
+  heads.world.n_heads = 0;
+  EXPECT_NE(test::error_of([&] { heads.validate(); }).find("world.n_heads"), std::string::npos);
+  heads = Config{};
+  heads.decoder.heads = 0;
+  EXPECT_NE(test::error_of([&] { heads.validate(); }).find("decoder.heads"), std::string::npos);
+}
+
+TEST(Config, NumbersAreReadAsWritten) {
+  Config c;
+  EXPECT_NE(test::error_of([&] { c.set("world.d_model=0x10"); }).find("expects int"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("run.seed=-1"); }).find("run.seed"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("world.lr=1e39"); }).find("allowed [0, 10]"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("world.lr=.inf"); }).find("not finite"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("world.lr=1e400"); }).find("world.lr"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("world.lr=.nan"); }).find("NaN"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { c.set("world.lr=nan"); }).find("world.lr"), std::string::npos);
+  c.set("run.seed=18446744073709551615");
+  EXPECT_EQ(c.run.seed, 18446744073709551615ull);
+  c.set("world.lr=+2e-4");
+  EXPECT_DOUBLE_EQ(c.world.lr, 2e-4);
 }
 
 TEST(Plan, PaperConfigMatchesThePaper) {

@@ -135,7 +135,11 @@ TEST(Signals, InterpolationAndMissingValues) {
   Signals s = read_signals_csv(dir / "s.csv");
   EXPECT_DOUBLE_EQ(s.speed_at(0.5), 15.0);
   EXPECT_DOUBLE_EQ(s.speed_at(1.5), 25.0);
-  EXPECT_NEAR(s.curvature_at(1.0), 0.01, 1e-12);  // empty cell: interpolated across, not read as 0
+  // empty cell: missing, neither read as 0 nor interpolated across (README: empty cells stay NaN)
+  EXPECT_TRUE(std::isnan(s.curvature_at(1.0)));
+  EXPECT_TRUE(std::isnan(s.curvature_at(0.5)));
+  EXPECT_TRUE(std::isnan(s.curvature_at(1.5)));
+  EXPECT_DOUBLE_EQ(s.curvature_at(2.0), 0.02);
   EXPECT_TRUE(std::isnan(s.speed_at(-0.1)));     // outside the recorded span: missing
   EXPECT_TRUE(std::isnan(s.speed_at(2.5)));
   EXPECT_EQ(s.caption_at(1.2), "left bend, rain");
@@ -143,7 +147,7 @@ TEST(Signals, InterpolationAndMissingValues) {
 
   write_file_atomic(dir / "cols.csv", "time,speed,curvature\n0,1,2\n");
   EXPECT_NE(error_of([&] { read_signals_csv(dir / "cols.csv"); }).find("cols.csv:1"), std::string::npos);
-  write_file_atomic(dir / "nan.csv", "time_s,speed,curvature\n0,1,2\n1,nan,2\n");
+  write_file_atomic(dir / "nan.csv", "time_s,speed,curvature\n0,1,0.2\n1,nan,0.2\n");
   std::string e = error_of([&] { read_signals_csv(dir / "nan.csv"); });
   EXPECT_NE(e.find("nan.csv:3"), std::string::npos) << e;
   EXPECT_NE(e.find("speed"), std::string::npos) << e;
@@ -160,7 +164,7 @@ TEST(Ingest, VideoWithSignalsResizesAndKeepsTimestamps) {
   o.width = 64;
   o.signals = dir / "sig.csv";
   o.meta = {{"weather", "fog"}, {"latitude", "51.5"}, {"longitude", "-0.1"}, {"driver", "a"}};
-  EpisodeMeta m = ingest_video(video, dir / "ds", o);
+  EpisodeMeta m = ingest_video(video, dir / "ds", o).meta;
   EXPECT_EQ(m.num_frames, 20);
   Episode ep(dir / "ds" / "episodes" / "clip");
   EXPECT_EQ(ep.meta().weather, "fog");
@@ -198,7 +202,7 @@ TEST(Ingest, RealClipsFromSharedData) {
   test::TempDir dir;
   IngestOptions o;
   o.max_frames = 30;
-  EpisodeMeta m = ingest_video(real / "highway-sunny-720p25.mp4", dir / "ds", o);
+  EpisodeMeta m = ingest_video(real / "highway-sunny-720p25.mp4", dir / "ds", o).meta;
   EXPECT_EQ(m.num_frames, 30);
   EXPECT_NEAR(m.fps, 25.0, 0.01);
   Episode ep(dir / "ds" / "episodes" / m.id);
@@ -207,14 +211,14 @@ TEST(Ingest, RealClipsFromSharedData) {
   EXPECT_GT(mean[0] + mean[1] + mean[2], 60);  // a real, non-black picture
 
   // 29.97 fps MPEG-4: timestamps follow the container's rate.
-  EpisodeMeta n = ingest_video(real / "night-rural-1080p30.mp4", dir / "ds", [&] { auto p = o; p.max_frames = 31; return p; }());
+  EpisodeMeta n = ingest_video(real / "night-rural-1080p30.mp4", dir / "ds", [&] { auto p = o; p.max_frames = 31; return p; }()).meta;
   Episode night(dir / "ds" / "episodes" / n.id);
   EXPECT_NEAR(night.time_s(30) - night.time_s(0), 30 / 29.97, 0.01);
   // KITTI: greyscale PNG directory at 10 Hz.
   IngestOptions k = o;
   k.fps = 10;
   k.max_frames = 12;
-  EpisodeMeta km = ingest_video(real / "kitti-residential-gray-10hz", dir / "ds", k);
+  EpisodeMeta km = ingest_video(real / "kitti-residential-gray-10hz", dir / "ds", k).meta;
   Episode kitti(dir / "ds" / "episodes" / km.id);
   EXPECT_EQ(kitti.size(), 12);
   EXPECT_NEAR(kitti.time_s(11), 1.1, 1e-9);

@@ -29,7 +29,8 @@ void register_convert(CLI::App& app) {
   cmd->add_option("--interpolate-from", *from,
                   "weights WEIGHTS was fine-tuned from: write FROM + alpha (WEIGHTS - FROM) instead (WiSE-FT; keeps "
                   "more of what the fine-tune cost, MODEL_CARD.md)");
-  auto* alpha_opt = cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS");
+  auto* alpha_opt = cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS (beyond: extrapolates)")
+                        ->check(kSignedNumber);
   cmd->add_option("--out", *out, "output file (may be WEIGHTS itself)")->required();
   cmd->callback([=] {
     if (!*half && sets->empty() && from->empty())

@@ -83,10 +83,10 @@ void register_decoder(CLI::App& app) {
     auto dataset = std::make_shared<std::string>(), tok = std::make_shared<std::string>();
     cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
     cmd->add_option("--tokenizer", *tok, "tokenizer weights (frozen; gives the conditioning tokens)")->required();
-    cmd->add_option("--steps", o->steps, "total steps (default: config decoder.steps)");
+    cmd->add_option("--steps", o->steps, "total steps (default: config decoder.steps)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init, "start from these video decoder weights (fine-tuning; ignored when resuming)");
-    cmd->add_option("--val-every", o->val_every, "steps between validations");
-    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, decoder.safetensors, metrics.jsonl)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
@@ -122,8 +122,8 @@ void register_decoder(CLI::App& app) {
     cmd->add_option("DATASET", *dataset, "episode dataset (its validation episodes are decoded)")->required();
     cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)")->required();
     cmd->add_option("--tokenizer", *tok, "tokenizer weights")->required();
-    cmd->add_option("--clips", eo->clips, "held-out clips");
-    cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip");
+    cmd->add_option("--clips", eo->clips, "held-out clips")->check(number_in({1, 1e6}));
+    cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip")->check(number_in({2, 1e6}));
     cmd->add_option("--steps", *steps, "DDIM step counts to compare, e.g. 50,20,10");
     cmd->add_option("--token-fps", eo->token_fps,
                     "rate of the tokens the video decoder gets: 6.25 (the world model's; upsampled to 25 Hz), 12.5, "
@@ -203,9 +203,11 @@ void register_decode(CLI::App& app) {
   cmd->add_option("TOKENS", *tokens, "rollout.safetensors (gaia generate), tokens .npy [N, h, w], or a token episode dir")
       ->required();
   cmd->add_option("--tokenizer", *tok, "tokenizer weights (its decoder for --fast and the decoder's conditioning)")->required();
-  cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)");
-  cmd->add_flag("--fast", *fast, "decode frame by frame with the tokenizer's decoder (a quick preview)");
-  cmd->add_option("--ddim-steps", *steps, "DDIM steps (default: the decoder's config, paper §5.2: 50)");
+  auto* decoder_opt = cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)");
+  cmd->add_flag("--fast", *fast, "decode frame by frame with the tokenizer's decoder (a quick preview)")
+      ->excludes(decoder_opt);
+  cmd->add_option("--ddim-steps", *steps, "DDIM steps (default: the decoder's config, paper §5.2: 50)")
+      ->check(key_range("decoder.ddim_steps"));
   cmd->add_option("--fps", *fps, "output frame rate: 6.25, 12.5 or 25 (temporal upsampling, §5.2)");
   cmd->add_option("--token-fps", *token_fps, "frame rate of the token frames");
   add_shared_flags(cmd, flags.get(), "output video path (.mp4; a .gif and a .png contact sheet are written beside it)");
@@ -243,9 +245,7 @@ void register_decode(CLI::App& app) {
     auto frames = decoder::side_by_side(video);
     fs::path out = flags->out;
     if (out.has_parent_path()) fs::create_directories(out.parent_path());
-    data::write_video(out, frames, out_fps);
     fs::path gif = fs::path(out).replace_extension(".gif"), png = fs::path(out).replace_extension(".png");
-    data::write_gif(gif, frames, out_fps);
     std::vector<cv::Mat> sheet;
     std::vector<std::string> labels;
     const size_t every = std::max<size_t>(1, frames.size() / 12);
@@ -253,7 +253,19 @@ void register_decode(CLI::App& app) {
       sheet.push_back(frames[k]);
       labels.push_back(fmt::format("{:.2f} s", double(k) / out_fps));
     }
-    data::write_png(png, synth::contact_sheet(sheet, labels, 4, std::min(512, frames[0].cols)));
+    // The three files are one output: when one cannot be written (a full disk), the ones before it go too.
+    std::vector<fs::path> written;
+    try {
+      data::write_video(out, frames, out_fps);
+      written.push_back(out);
+      data::write_gif(gif, frames, out_fps);
+      written.push_back(gif);
+      data::write_png(png, synth::contact_sheet(sheet, labels, 4, std::min(512, frames[0].cols)));
+    } catch (...) {
+      std::error_code ec;
+      for (auto& w : written) fs::remove(w, ec);
+      throw;
+    }
     std::printf("decoded %lld token frames x %lld futures -> %zu frames at %g Hz (%s): %s, %s, %s\n", (long long)N,
                 (long long)F, frames.size(), out_fps, *fast ? "tokenizer decoder" : "video decoder", out.c_str(),
                 gif.c_str(), png.c_str());

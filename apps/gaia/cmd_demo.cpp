@@ -69,12 +69,15 @@ void register_demo(CLI::App& app) {
   cmd->add_option("--video", d->video, "a driving video as the prompt instead of a procedural drive (e.g. a real clip)");
   cmd->add_option("--prompt-frames", d->prompt_frames, "video prompt frames (6.25 Hz)");
   cmd->add_option("--frames", d->frames, "frames to generate (6.25 Hz)");
-  cmd->add_option("--ddim-steps", d->ddim_steps, "DDIM steps of the video decoder (paper: 50; 10 keeps the demo short)");
+  cmd->add_option("--ddim-steps", d->ddim_steps, "DDIM steps of the video decoder (paper: 50; 10 keeps the demo short)")
+      ->check(key_range("decoder.ddim_steps"));
   cmd->add_option("--fps", d->fps, "output rate of the video decoder: 6.25, 12.5 or 25 Hz");
-  cmd->add_option("--guidance", d->guidance, "classifier-free guidance scale of the text-prompted rollouts");
+  cmd->add_option("--guidance", d->guidance, "classifier-free guidance scale of the text-prompted rollouts")
+      ->check(key_range("world.guidance_scale"));
   cmd->add_option("--steer-guidance", d->steer_guidance,
                   "classifier-free guidance scale on the steering commands (the mirrored command as unconditional; "
-                  "0 = off)");
+                  "0 = off)")
+      ->check(key_range("world.guidance_scale"));
   cmd->add_flag("--from-scratch", d->from_scratch, "first train every model with `gaia train-all` (hours on a CPU)");
   add_shared_flags(cmd, flags.get(), "output directory (default: demo-out)");
   cmd->callback([=] {

@@ -42,14 +42,16 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--dynamics-probe", e->dynamics_probe, "dynamics probe weights (default: the shipped one)");
   cmd->add_option("--scene-probe", e->scene_probe, "scene probe weights (default: the shipped one)");
   cmd->add_option("--only", e->only, "comma-separated parts: action, text, futures, long");
-  cmd->add_option("--prompts", e->prompts, "held-out video prompts");
-  cmd->add_option("--prompt-frames", e->prompt_frames, "prompt frames per rollout");
-  cmd->add_option("--frames", e->frames, "generated frames per rollout (action control, futures)");
-  cmd->add_option("--futures", e->futures, "futures per prompt (diversity) and per text prompt and setting");
-  cmd->add_option("--text-frames", e->text_frames, "frames generated from each text prompt");
-  cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)");
+  cmd->add_option("--prompts", e->prompts, "held-out video prompts")->check(number_in({1, 1e6}));
+  cmd->add_option("--prompt-frames", e->prompt_frames, "prompt frames per rollout")->check(number_in({1, 1e6}));
+  cmd->add_option("--frames", e->frames, "generated frames per rollout (action control, futures)")->check(number_in({1, 1e6}));
+  cmd->add_option("--futures", e->futures, "futures per prompt (diversity) and per text prompt and setting")->check(number_in({1, 1e6}));
+  cmd->add_option("--text-frames", e->text_frames, "frames generated from each text prompt")->check(number_in({1, 1e6}));
+  cmd->add_option("--top-k", e->top_k, "k for top-k sampling (default: the world model's config world.top_k)")
+      ->check(key_range("world.top_k"));
   cmd->add_option("--action-guidance", e->action_guidance,
-                  "classifier-free guidance scale on the commanded actions (action control; 0 = off)");
+                  "classifier-free guidance scale on the commanded actions (action control; 0 = off)")
+      ->check(key_range("world.guidance_scale"));
   cmd->add_option("--action-negative", e->action_negative,
                   "the unconditional branch of action guidance: mirror (the counter-command: turning the other way, "
                   "at the kept speed; default) or null (no actions, eq. 2 as in the paper)")
@@ -61,12 +63,13 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--scales", e->scales,
                   "guidance scales for text control (default 0,1,2,4,8; the last also runs with the negative prompt "
                   "and with the schedules)")
-      ->delimiter(',');
-  cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)");
-  cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout");
+      ->delimiter(',')
+      ->check(key_range("world.guidance_scale"));
+  cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)")->check(number_in({0, 1e6, true, false}));
+  cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout")->check(number_in({0, 1e6, true, false}));
   cmd->add_option("--long-rollouts", e->long_rollouts,
                   "long rollouts, each from another held-out prompt, run as one batch; their window statistics are "
-                  "averaged (one drive's windows vary as much as real drives do)");
+                  "averaged (one drive's windows vary as much as real drives do)")->check(number_in({1, 1e6}));
   cmd->add_option("--metrics", e->metrics, "NAME=RUN/metrics.jsonl of a training run: its loss curves go in the report")
       ->take_all();
   cmd->add_option("--plot", e->plots, "an extra SVG plot for the report (e.g. the balance.svg of gaia data stats)")

@@ -6,9 +6,11 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
+#include "gaia/control/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
 #include "gaia/data/video_io.h"
+#include "gaia/plan/plan.h"
 #include "gaia/synth/synth.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
@@ -46,27 +48,31 @@ void register_generate(CLI::App& app) {
   auto g = std::make_shared<GenerateFlags>();
   cmd->add_option("--world", g->world, "world model weights (world.safetensors)")->required();
   cmd->add_option("--tokenizer", g->tokenizer, "tokenizer weights: decodes a preview video, tokenizes --video");
-  cmd->add_option("--tokens", g->tokens, "video prompt from this token dataset (with --episode)");
+  auto* tokens_opt = cmd->add_option("--tokens", g->tokens, "video prompt from this token dataset (with --episode)");
   cmd->add_option("--episode", g->episode, "episode id or index in --tokens");
   cmd->add_option("--start", g->start, "first prompt step in the episode");
-  cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)");
+  cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)")->excludes(tokens_opt);
   cmd->add_option("--prompt-frames", g->prompt_frames, "prompt frames (default: context - 1, at most 4)");
-  cmd->add_option("--frames", g->frames, "frames to generate (sliding window beyond the context)");
+  cmd->add_option("--frames", g->frames, "frames to generate (sliding window beyond the context)")
+      ->check(number_in({1, 1e6}));
   cmd->add_option("--window-stride", g->window_stride,
-                  "steps the window drops when full (1 = the paper; S re-encodes the history every S frames, faster)");
-  cmd->add_option("--futures", g->futures, "futures sampled in one batch");
+                  "steps the window drops when full (1 = the paper; S re-encodes the history every S frames, faster)")
+      ->check(number_in({1, 1e6}));
+  cmd->add_option("--futures", g->futures, "futures sampled in one batch")->check(number_in({1, 1e6}));
   cmd->add_option("--actions", g->actions_csv, "CSV with speed,curvature columns, one row per generated frame");
   cmd->add_option("--steer", g->steer, "steering preset: left, right, strong-left, strong-right, straight");
-  cmd->add_option("--speed", g->speed, "speed for every generated frame (m/s)");
+  cmd->add_option("--speed", g->speed, "speed for every generated frame (m/s)")->check(number_in({0, 100}));
   cmd->add_option("--text", g->text, "text prompt for every frame");
   cmd->add_option("--negative", g->negative, "negative prompt: replaces the unconditional logits (§5.1)");
   cmd->add_option("--sampling", g->sampling, "argmax, sample, top-k (default) or top-p");
-  cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)");
-  cmd->add_option("--top-p", g->top_p, "p for top-p");
-  cmd->add_option("--temperature", g->temperature, "softmax temperature (default: config world.temperature)");
+  cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)")->check(key_range("world.top_k"));
+  cmd->add_option("--top-p", g->top_p, "p for top-p")->check(number_in({0, 1, true, false}));
+  cmd->add_option("--temperature", g->temperature, "softmax temperature (default: config world.temperature)")
+      ->check(key_range("world.temperature"));
   cmd->add_option("--guidance", g->guidance,
                   "classifier-free guidance scale s (0 = off); guided on actions alone, top-k tokens stay within the "
-                  "unguided top k (--set world.guide_actions_within_top_k=false lifts that)");
+                  "unguided top k (--set world.guide_actions_within_top_k=false lifts that)")
+      ->check(key_range("world.guidance_scale"));
   cmd->add_option("--action-negative", g->action_negative,
                   "what guidance contrasts the actions with: mirror (the counter-command: turning the other way at "
                   "the prompt's speed; default) or null (no actions, eq. 2 as in the paper)")
@@ -94,11 +100,15 @@ void register_generate(CLI::App& app) {
     const int64_t want_p = g->prompt_frames >= 0 ? g->prompt_frames : std::min<int64_t>(L.T - 1, 4);
     tokenizer::ImageTokenizer tok{nullptr};
     Config tok_cfg;
-    if (!g->tokenizer.empty()) tok = tokenizer::load_tokenizer(g->tokenizer, dev, &tok_cfg);
+    if (!g->tokenizer.empty()) {
+      tok = tokenizer::load_tokenizer(g->tokenizer, dev, &tok_cfg);
+      control::check_tokenizer_fits(info, g->world, tok, g->tokenizer);  // before anything is written
+    }
     if (!g->tokens.empty()) {
       world::TokenDataset ds(g->tokens, info.K);
-      if (ds.tokens_per_step() != L.n)
-        fail("{}: {} tokens per frame, the world model takes {}", g->tokens, ds.tokens_per_step(), L.n);
+      if (ds.grid_h() != info.grid_h || ds.grid_w() != info.grid_w)
+        fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g->tokens, ds.grid_h(), ds.grid_w(), g->world,
+             info.grid_h, info.grid_w);
       size_t e = 0;
       if (!g->episode.empty()) {
         auto it = std::find(ds.ids().begin(), ds.ids().end(), g->episode);
@@ -178,6 +188,9 @@ void register_generate(CLI::App& app) {
     if (o.guidance.active() && !p.actions.defined() && !p.text_ids.defined() && !p.negative_text_ids.defined())
       fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
 
+    const int passes = o.guidance.active() ? (p.actions.defined() && p.text_ids.defined() ? 3 : 2) : 1;
+    plan::check_memory(plan::rollout_memory_bytes(info.config, g->futures, steps, passes, bool(tok)),
+                       fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");
     auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });
     bar.finish();

@@ -14,12 +14,20 @@ void register_plan(CLI::App& app) {
   auto positional = std::make_shared<std::string>();
   cmd->add_option("CONFIG", *positional, "config YAML (same as --config)");
   add_shared_flags(cmd, flags.get(), "unused");
-  auto json = std::make_shared<bool>(false);
+  auto json = std::make_shared<bool>(false), keys = std::make_shared<bool>(false);
   cmd->add_flag("--json", *json, "print the plan as JSON");
+  cmd->add_flag("--keys", *keys, "list every config key with its type, value in this config and allowed range");
   cmd->callback([=] {
     SharedFlags f = *flags;
     if (!positional->empty()) f.config = *positional;
     Config c = resolve_config(f);
+    if (*keys) {
+      std::printf("%-34s %-12s %-24s %s\n", "key", "type", "value", "allowed");
+      for (auto& k : c.fields())
+        std::printf("%-34s %-12s %-24s %s\n", k.key.c_str(), k.type.c_str(), k.get().c_str(),
+                    k.range.bounded() ? k.range.str().c_str() : "");
+      return;
+    }
     plan::Plan p = plan::make_plan(c);
     if (*json) {
       nlohmann::json j = {{"config", c.name},

@@ -22,13 +22,13 @@ void register_probe(CLI::App& app) {
     auto kind = std::make_shared<std::string>(), dataset = std::make_shared<std::string>();
     cmd->add_option("KIND", *kind, "dynamics | scene")->required();
     cmd->add_option("DATASET", *dataset, "episode dataset with labels (gaia synth)")->required();
-    cmd->add_option("--steps", o->steps, "training steps");
+    cmd->add_option("--steps", o->steps, "training steps")->check(number_in({1, 1e9}));
     cmd->add_option("--batch", o->batch, "examples per step");
     cmd->add_option("--frames", o->frames,
                     "dynamics: frames one example reads, one world-model step apart (default 4: gentle steering barely "
                     "shows in 2; `gaia eval` then needs at least 3 generated frames)");
-    cmd->add_option("--val-every", o->val_every, "steps between validations");
-    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     auto* through = cmd->add_option("--tokenizer", o->tokenizer,
                                     "read a share of the training frames through this tokenizer (encoded and decoded), "
                                     "as `gaia eval` reads generated frames; validation then also scores decoded "
@@ -69,7 +69,7 @@ void register_probe(CLI::App& app) {
     cmd->add_option("WEIGHTS", *weights, "probe weights (probe-KIND.safetensors)")->required();
     cmd->add_option("DATASET", *dataset, "episode dataset with labels")->required();
     auto tok_path = std::make_shared<std::string>();
-    cmd->add_option("--examples", *n, "held-out examples (evenly spaced)");
+    cmd->add_option("--examples", *n, "held-out examples (evenly spaced)")->check(number_in({1, 1e9}));
     cmd->add_option("--tokenizer", *tok_path,
                     "also score the frames read through this tokenizer (encoded and decoded), as `gaia eval` reads "
                     "generated frames (key \"decoded\")");

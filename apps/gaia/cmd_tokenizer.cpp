@@ -74,9 +74,9 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--vgg", *vgg, "VGG16 weights (torchvision layout, safetensors) for the perceptual loss");
     cmd->add_option("--dino", *dino, "DINO ViT weights (timm or torchvision layout, safetensors) for the DINO loss");
     cmd->add_option("--init", o->init, "start from these tokenizer weights (fine-tuning; ignored when resuming)");
-    cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)");
-    cmd->add_option("--val-every", o->val_every, "steps between validations");
-    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)")->check(number_in({1, 1e9}));
+    cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     cmd->add_flag("--decoder-only", o->decoder_only,
                   "train only the decoder (needs --init): encoder and codebook frozen, so every frame keeps its codes "
                   "and token datasets made with the --init weights stay valid");
@@ -116,8 +116,9 @@ void register_tokenizer(CLI::App& app) {
     auto stride = std::make_shared<int>(5);
     cmd->add_option("SOURCE", *src, "dataset (its validation episodes) or a video file")->required();
     cmd->add_option("--tokenizer", *weights, "tokenizer weights (safetensors)")->required();
-    cmd->add_option("--max-frames", *max_frames, "frames to score");
-    cmd->add_option("--stride", *stride, "video: use every Nth frame (a dataset's frames are spread evenly over its held-out episodes)");
+    cmd->add_option("--max-frames", *max_frames, "frames to score")->check(number_in({1, 1e9}));
+    cmd->add_option("--stride", *stride, "video: use every Nth frame (a dataset's frames are spread evenly over its held-out episodes)")
+        ->check(number_in({1, 1e6}));
     add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)");
     cmd->callback([=] {
       auto [dev, c, t] = open_tokenizer(*flags, *weights);
@@ -151,7 +152,7 @@ void register_tokenizer(CLI::App& app) {
     auto max_frames = std::make_shared<int>(100);
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
     cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
-    cmd->add_option("--max-frames", *max_frames, "frames to reconstruct");
+    cmd->add_option("--max-frames", *max_frames, "frames to reconstruct")->check(number_in({1, 1e9}));
     add_shared_flags(cmd, flags.get(), "output directory");
     cmd->callback([=] {
       if (flags->out.empty()) fail("gaia tokenizer reconstruct: --out DIR is required");
@@ -181,7 +182,7 @@ void register_tokenizer(CLI::App& app) {
     auto n = std::make_shared<int>(6);
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
     cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
-    cmd->add_option("--frames", *n, "frames to show");
+    cmd->add_option("--frames", *n, "frames to show")->check(number_in({1, 1e6}));
     add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)");
     cmd->callback([=] {
       auto [dev, c, t] = open_tokenizer(*flags, *weights);

@@ -79,6 +79,7 @@ void register_train_all(CLI::App& app) {
   cmd->callback([=] {
     Config c = resolve_config(*flags);  // validates --config / --set before hours of work start
     const fs::path out = flags->out.empty() ? fs::path("runs/default") : fs::path(flags->out);
+    DirLock lock(out);  // one train-all per --out (each stage also locks its own directory)
     std::vector<std::string> common;
     if (!flags->config.empty()) common.insert(common.end(), {"--config", flags->config});
     for (auto& s : flags->sets) common.insert(common.end(), {"--set", s});

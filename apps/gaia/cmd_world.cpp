@@ -43,9 +43,9 @@ void register_world(CLI::App& app) {
     auto o = std::make_shared<world::WorldTrainOptions>();
     auto tokens = std::make_shared<std::string>();
     cmd->add_option("TOKENS", *tokens, "token dataset (gaia tokenize) or a tokens .npy [frames, h, w]")->required();
-    cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)");
-    cmd->add_option("--val-every", o->val_every, "steps between validations");
-    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)");
+    cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)")->check(number_in({1, 1e9}));
+    cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
+    cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init,
                     "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
                     "not carried over: run gaia world calibrate again afterwards)");

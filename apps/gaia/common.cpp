@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include <algorithm>
+#include <cmath>
 #include <regex>
 
 #include <opencv2/core.hpp>
@@ -75,6 +76,52 @@ void apply_sampling_sets(const SharedFlags& f, const std::string& section, const
   }
   model_cfg.validate();
 }
+
+CLI::Validator number_in(const Range& r) {
+  return CLI::Validator(
+      [r](std::string& in) {
+        double v = 0;
+        if (!CLI::detail::lexical_cast(in, v)) return fmt::format("'{}' is not a number", in);
+        if (!r.contains(v)) return fmt::format("{} is out of range: allowed {}", in, r.str());
+        return std::string{};
+      },
+      r.str());
+}
+
+CLI::Validator key_range(const std::string& config_key) {
+  Config c;
+  for (auto& f : c.fields())
+    if (f.key == config_key) return number_in(f.range);
+  fail("key_range: no config key '{}'", config_key);  // a programming error, found by the CLI tests
+}
+
+const CLI::Validator kSignedNumber{[](std::string&) { return std::string{}; }, "", "signed"};
+
+namespace {
+void check_numbers_of(CLI::App* app) {
+  for (CLI::Option* opt : app->get_options()) {
+    const std::string type = opt->get_type_name().substr(0, opt->get_type_name().find(':'));
+    if (type != "FLOAT" && type != "INT" && type != "UINT") continue;
+    bool is_signed = true;
+    try {
+      opt->get_validator("signed");
+    } catch (const CLI::OptionNotFound&) {
+      is_signed = false;
+    }
+    opt->check(CLI::Validator(
+        [is_signed](std::string& in) {
+          double v = 0;
+          if (!CLI::detail::lexical_cast(in, v) || !std::isfinite(v)) return fmt::format("'{}' is not a finite number", in);
+          if (!is_signed && v < 0) return fmt::format("{} is negative", in);
+          return std::string{};
+        },
+        ""));
+  }
+  for (CLI::App* sub : app->get_subcommands([](CLI::App*) { return true; })) check_numbers_of(sub);
+}
+}  // namespace
+
+void check_numbers(CLI::App& app) { check_numbers_of(&app); }
 
 void apply_threads(const Config& c) {
   if (c.run.threads > 0) cv::setNumThreads(c.run.threads);

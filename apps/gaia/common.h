@@ -35,6 +35,14 @@ void apply_sampling_sets(const SharedFlags& f, const std::string& section, const
 extern const std::vector<std::string> kWorldSamplingKeys;    // world.top_k, world.temperature, ...
 extern const std::vector<std::string> kDecoderSamplingKeys;  // decoder.ddim_steps, decoder.start_time, ...
 
+// Numbers on the command line: after every subcommand is registered, check_numbers() makes every numeric option
+// refuse NaN and infinities, and values below 0 unless the option carries kSignedNumber. Options add their own
+// bounds with number_in() or, where a flag overrides a config key, with key_range() (one range for both).
+void check_numbers(CLI::App& app);
+CLI::Validator number_in(const Range& r);
+CLI::Validator key_range(const std::string& config_key);  // e.g. "world.top_k" for --top-k
+extern const CLI::Validator kSignedNumber;
+
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
 

@@ -3,7 +3,9 @@
 // Every field is registered once (Config::visit) with its dotted key and a comment; loading, overrides,
 // dumping and "unknown key" errors all go through that list, so a key cannot be half-supported.
 // Defaults are the CPU-sized default config; configs/paper.yaml holds the paper's values (§4).
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <functional>
 #include <string>
 #include <vector>
@@ -11,6 +13,19 @@
 #include "gaia/core/fs.h"
 
 namespace gaia {
+
+// The values a numeric key allows (each entry, for a list): [lo, hi], either end open. Declared once per key in
+// Config::fields() and checked wherever a value arrives: YAML files, --set, a weights file's stored config, and
+// validate() for configs built in code. Upper bounds stop a typo from asking for the machine's whole memory.
+struct Range {
+  double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+  bool lo_open = false, hi_open = false;
+  bool contains(double v) const {
+    return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+  }
+  bool bounded() const { return std::isfinite(lo) || std::isfinite(hi); }
+  std::string str() const;  // "[1, 1024]", "(0, 1]", "[0, inf)"
+};
 
 struct DataConfig {
   int height = 72;               // paper §4.1: 288 (default is 4x smaller for the CPU)
@@ -180,15 +195,17 @@ struct Config {
   // Registry: each field with its dotted key ("world.d_model").
   struct Field {
     std::string key, type;
+    Range range;                                  // allowed values (numbers and int lists; unbounded otherwise)
     std::function<std::string()> get;            // YAML text of the value
-    std::function<void(const std::string&)> set;  // parses YAML text; throws gaia::Error on bad values
+    std::function<void(const std::string&)> set;  // parses YAML text; throws gaia::Error on a bad or out-of-range value
+    std::function<void()> check;                  // throws gaia::Error if the current value is out of range
   };
   std::vector<Field> fields();
 
   static Config load(const fs::path& yaml);        // unknown keys -> "FILE: unknown config key 'a.b'"
   void apply_yaml(const std::string& text, const std::string& where);
   void set(const std::string& key_eq_value);        // --set world.d_model=512
-  void validate() const;                            // cross-field checks (D divides H, W; ...)
+  void validate() const;                            // every key's range, then cross-field checks (D divides H, W; ...)
   std::string to_yaml();
 };
 

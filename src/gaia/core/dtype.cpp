@@ -39,7 +39,9 @@ bool dtype_from_safetensors(const std::string& s, DType* out) {
 
 int64_t numel(const std::vector<int64_t>& shape) {
   int64_t n = 1;
-  for (auto d : shape) n *= d;
+  // Shapes come from file headers: a product that overflows must fail, not wrap to a size that passes the checks.
+  for (auto d : shape)
+    if (__builtin_mul_overflow(n, d, &n)) fail("shape {} has more elements than int64 can count", shape_str(shape));
   return n;
 }
 

@@ -25,7 +25,8 @@ class StagingDir {
   StagingDir(const StagingDir&) = delete;
   StagingDir& operator=(const StagingDir&) = delete;
   const fs::path& path() const { return tmp_; }
-  // Replaces any existing final_path (only if `overwrite`), then renames the staging dir into place.
+  // Replaces any existing final_path (only if `overwrite`), then renames the staging dir into place. The swap is one
+  // atomic exchange where the file system allows it, so no instant lacks final_path.
   void commit(bool overwrite = false);
 
  private:
@@ -52,5 +53,31 @@ class MappedFile {
 
 // A unique suffix for temporary names (pid + counter), so concurrent writers never collide.
 std::string unique_suffix();
+
+// The pid inside a temporary name made with unique_suffix() (".tmp-x-PID-N[.ext]", "x.tmp-PID-N", "x.old-PID-N"), or 0.
+long temporary_owner(const std::string& name);
+
+// True while process `pid` exists.
+bool process_alive(long pid);
+
+// Removes the entries of `dir` that are temporaries (names from unique_suffix()) of processes no longer alive: what a
+// kill leaves behind. Returns how many it removed.
+int remove_stale_temporaries(const fs::path& dir);
+
+// An exclusive lock on a directory (flock on DIR/.lock) for the life of the object. The kernel drops it when the
+// process dies, so a kill never leaves a stale lock. A second holder fails at once, naming the first one's pid.
+// A directory the lock created and that holds nothing else when the lock is released is removed again.
+class DirLock {
+ public:
+  explicit DirLock(const fs::path& dir);
+  ~DirLock();
+  DirLock(const DirLock&) = delete;
+  DirLock& operator=(const DirLock&) = delete;
+
+ private:
+  fs::path dir_;
+  int fd_ = -1;
+  bool created_ = false;
+};
 
 }  // namespace gaia

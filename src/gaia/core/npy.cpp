@@ -1,7 +1,8 @@
 #include "gaia/core/npy.h"
 
 #include <cstring>
-#include <regex>
+#include <cctype>
+#include <optional>
 
 #include "gaia/core/error.h"
 
@@ -35,6 +36,26 @@ bool dtype_of(const std::string& d, DType* out) {
   return false;
 }
 
+// The value of 'key' in the header's Python dict literal: the text between `open` and `close` right after
+// `'key':`, or (open == 0) the rest of the header from there; nullopt when the key or a delimiter is missing.
+// Plain string search: std::regex recurses once per character and overflows the stack on a long header.
+std::optional<std::string> header_value(const std::string& h, const char* key, char open, char close) {
+  const std::string k = std::string("'") + key + "'";
+  size_t at = h.find(k);
+  if (at == std::string::npos) return std::nullopt;
+  auto skip_space = [&] { while (at < h.size() && std::isspace(static_cast<unsigned char>(h[at]))) ++at; };
+  at += k.size();
+  skip_space();
+  if (at >= h.size() || h[at] != ':') return std::nullopt;
+  ++at;
+  skip_space();
+  if (open == 0) return h.substr(at);
+  if (at >= h.size() || h[at] != open) return std::nullopt;
+  const size_t end = h.find(close, at + 1);
+  if (end == std::string::npos) return std::nullopt;
+  return h.substr(at + 1, end - at - 1);
+}
+
 }  // namespace
 
 NpyArray npy_read(const fs::path& path) {
@@ -56,22 +77,31 @@ NpyArray npy_read(const fs::path& path) {
   }
   if (hstart + hlen > raw.size()) fail("{}: truncated .npy header", p);
   std::string header = raw.substr(hstart, hlen);
-  std::smatch m;
-  static const std::regex descr_re("'descr'\\s*:\\s*'([^']+)'");
-  static const std::regex order_re("'fortran_order'\\s*:\\s*(True|False)");
-  static const std::regex shape_re("'shape'\\s*:\\s*\\(([^)]*)\\)");
   NpyArray a;
-  if (!std::regex_search(header, m, descr_re)) fail("{}: .npy header has no descr", p);
-  if (!dtype_of(m[1].str(), &a.dtype))
-    fail("{}: unsupported .npy dtype '{}' (want int16/32/64, uint8, float32/64)", p, m[1].str());
-  if (!std::regex_search(header, m, order_re)) fail("{}: .npy header has no fortran_order", p);
-  if (m[1].str() == "True") fail("{}: Fortran-order .npy arrays are not supported; save with C order", p);
-  if (!std::regex_search(header, m, shape_re)) fail("{}: .npy header has no shape", p);
-  std::string dims = m[1].str();
-  static const std::regex int_re("(\\d+)");
-  for (auto it = std::sregex_iterator(dims.begin(), dims.end(), int_re); it != std::sregex_iterator(); ++it)
-    a.shape.push_back(std::stoll((*it)[1].str()));
-  size_t need = static_cast<size_t>(a.size()) * dtype_size(a.dtype);
+  const auto descr = header_value(header, "descr", '\'', '\'');
+  if (!descr) fail("{}: .npy header has no descr", p);
+  if (!dtype_of(*descr, &a.dtype))
+    fail("{}: unsupported .npy dtype '{}' (want int16/32/64, uint8, float32/64)", p, *descr);
+  const std::string order = header_value(header, "fortran_order", 0, 0).value_or("");
+  if (order.rfind("True", 0) == 0) fail("{}: Fortran-order .npy arrays are not supported; save with C order", p);
+  if (order.rfind("False", 0) != 0) fail("{}: .npy header has no fortran_order", p);
+  const auto shape = header_value(header, "shape", '(', ')');
+  if (!shape) fail("{}: .npy header has no shape", p);
+  const std::string& dims = *shape;
+  for (size_t i = 0; i < dims.size();) {
+    if (!std::isdigit(static_cast<unsigned char>(dims[i]))) { ++i; continue; }
+    size_t j = i;
+    while (j < dims.size() && std::isdigit(static_cast<unsigned char>(dims[j]))) ++j;
+    try {
+      a.shape.push_back(std::stoll(dims.substr(i, j - i)));
+    } catch (const std::out_of_range&) {
+      fail("{}: .npy shape ({}) has a dimension too large for int64", p, dims);
+    }
+    i = j;
+  }
+  size_t need = 0;
+  if (__builtin_mul_overflow(static_cast<size_t>(numel(a.shape)), dtype_size(a.dtype), &need))
+    fail("{}: .npy shape {} is too large", p, shape_str(a.shape));
   size_t have = raw.size() - hstart - hlen;
   if (have < need) fail("{}: truncated .npy data ({} bytes, shape {} needs {})", p, have, shape_str(a.shape), need);
   if (have > need) fail("{}: .npy has {} trailing bytes after shape {}", p, have - need, shape_str(a.shape));

@@ -61,7 +61,9 @@ SafetensorsFile::SafetensorsFile(const fs::path& path) {
     size_t b = off[0].get<size_t>(), e = off[1].get<size_t>();
     if (b > e || e > data_size)
       fail("{}: tensor '{}' data_offsets [{}, {}] outside the data section ({} bytes; truncated file?)", p, name, b, e, data_size);
-    size_t expect = static_cast<size_t>(numel(t.shape)) * dtype_size(t.dtype);
+    size_t expect = 0;
+    if (__builtin_mul_overflow(static_cast<size_t>(numel(t.shape)), dtype_size(t.dtype), &expect))
+      fail("{}: tensor '{}' shape {} is too large", p, name, v["shape"].dump());
     if (e - b != expect)
       fail("{}: tensor '{}' has {} bytes but shape {} of {} needs {}", p, name, e - b, shape_str(t.shape),
            safetensors_name(t.dtype), expect);

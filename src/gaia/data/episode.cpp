@@ -1,8 +1,9 @@
 #include "gaia/data/episode.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
-#include <regex>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -21,6 +22,29 @@ json nan_to_null(double v) { return std::isnan(v) ? json(nullptr) : json(v); }
 
 double null_to_nan(const json& j) {
   return j.is_number() ? j.get<double>() : std::numeric_limits<double>::quiet_NaN();
+}
+
+// An id is one safe path component: it names a directory under DATASET/episodes, and names starting with '.'
+// are reserved for staging directories (and would make `.`/`..` escape the dataset).
+void check_episode_id(const std::string& id) {
+  // A loop, not std::regex: the regex recurses per character and a long id from a file would overflow the stack.
+  auto ok_char = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.'; };
+  const bool ok = !id.empty() && id.size() <= 200 && id[0] != '.' && std::all_of(id.begin(), id.end(), ok_char);
+  if (!ok)
+    fail("episode id '{}' must be 1-200 letters, digits, '-', '_' and '.', and must not start with '.'",
+         id.substr(0, 240));
+}
+
+// An integer field in [lo, hi]: a float (1e10) or an out-of-range number is an error, never a wrapped int.
+int64_t integer_field(const json& j, const char* key, int64_t lo, int64_t hi, const std::string& where) {
+  const json& v = j.at(key);
+  if (!v.is_number_integer()) fail("{}: '{}' must be an integer, got {}", where, key, v.dump());
+  // nlohmann keeps non-negative numbers unsigned: compare in the number's own type.
+  const bool ok = v.is_number_unsigned()
+                      ? v.get<uint64_t>() <= uint64_t(hi) && (lo <= 0 || v.get<uint64_t>() >= uint64_t(lo))
+                      : v.get<int64_t>() >= lo && v.get<int64_t>() <= hi;
+  if (!ok) fail("{}: '{}' = {} is out of range [{}, {}]", where, key, v.dump(), lo, hi);
+  return v.get<int64_t>();
 }
 
 }  // namespace
@@ -45,14 +69,14 @@ json EpisodeMeta::to_json() const {
 EpisodeMeta EpisodeMeta::from_json(const json& j, const std::string& where) {
   EpisodeMeta m;
   try {
-    int v = j.at("schema_version").get<int>();
+    const int64_t v = integer_field(j, "schema_version", 0, 1 << 20, where);
     if (v != kEpisodeSchemaVersion) fail("{}: schema_version {} is not supported (this gaia reads {})", where, v, kEpisodeSchemaVersion);
     m.id = j.at("id").get<std::string>();
     m.fps = j.at("fps").get<double>();
-    m.height = j.at("height").get<int>();
-    m.width = j.at("width").get<int>();
+    m.height = int(integer_field(j, "height", 1, 16384, where));
+    m.width = int(integer_field(j, "width", 1, 16384, where));
     m.frame_codec = j.at("frame_codec").get<std::string>();
-    m.num_frames = j.at("num_frames").get<int64_t>();
+    m.num_frames = integer_field(j, "num_frames", 0, int64_t(1) << 40, where);
     m.weather = j.value("weather", "");
     m.time_of_day = j.value("time_of_day", "");
     m.latitude = null_to_nan(j.value("latitude", json(nullptr)));
@@ -62,7 +86,10 @@ EpisodeMeta EpisodeMeta::from_json(const json& j, const std::string& where) {
   } catch (const json::exception& e) {
     fail("{}: bad episode metadata ({})", where, e.what());
   }
-  if (!(m.fps > 0)) fail("{}: fps must be positive", where);
+  check_episode_id(m.id);
+  if (!(m.fps > 0 && m.fps <= 1000)) fail("{}: fps must be in (0, 1000], got {}", where, m.fps);
+  if (!(std::isnan(m.latitude) || std::abs(m.latitude) <= 90) || !(std::isnan(m.longitude) || std::abs(m.longitude) <= 180))
+    fail("{}: latitude must be in [-90, 90] and longitude in [-180, 180] (or null)", where);
   if (m.height <= 0 || m.width <= 0) fail("{}: height/width must be positive", where);
   if (m.frame_codec != "raw" && m.frame_codec != "png" && m.frame_codec != "jpg")
     fail("{}: frame_codec '{}' is not raw, png or jpg", where, m.frame_codec);
@@ -84,12 +111,12 @@ void ensure_dataset(const fs::path& dataset) {
 
 EpisodeWriter::EpisodeWriter(const fs::path& dataset, EpisodeMeta meta, bool overwrite)
     : dataset_(dataset), meta_(std::move(meta)), overwrite_(overwrite) {
-  static const std::regex id_re("[A-Za-z0-9_.-]+");
-  if (!std::regex_match(meta_.id, id_re)) fail("episode id '{}' must match [A-Za-z0-9_.-]+", meta_.id);
+  check_episode_id(meta_.id);
   if (meta_.height <= 0 || meta_.width <= 0) fail("episode {}: height and width must be set", meta_.id);
   if (meta_.frame_codec != "raw" && meta_.frame_codec != "png" && meta_.frame_codec != "jpg")
     fail("episode {}: frame codec '{}' is not raw, png or jpg", meta_.id, meta_.frame_codec);
   ensure_dataset(dataset_);
+  remove_stale_temporaries(dataset_ / "episodes");  // what killed writers left behind
   fs::path final_dir = dataset_ / "episodes" / meta_.id;
   if (fs::exists(final_dir) && !overwrite_) fail("{}: episode already exists", final_dir.string());
   staging_ = std::make_unique<StagingDir>(final_dir);
@@ -240,7 +267,8 @@ Dataset::Dataset(const fs::path& root) : root_(root) {
   if (fs::exists(root / "episodes"))
     for (auto& e : fs::directory_iterator(root / "episodes")) {
       std::string name = e.path().filename().string();
-      if (e.is_directory() && name.rfind(".tmp-", 0) != 0 && fs::exists(e.path() / "episode.json")) ids_.push_back(name);
+      // Staging and moved-aside copies (".tmp-id-PID-N", "id.old-PID-N") are not episodes.
+      if (e.is_directory() && temporary_owner(name) == 0 && fs::exists(e.path() / "episode.json")) ids_.push_back(name);
     }
   std::sort(ids_.begin(), ids_.end());
 }

@@ -13,7 +13,7 @@
 namespace gaia::data {
 
 GeoBox parse_geobox(const std::string& s) {
-  auto cells = split_csv_line(s);
+  auto cells = split_csv_line(s, "--geofence '" + s + "'");
   if (cells.size() != 4) fail("--geofence '{}': expected lat_min,lon_min,lat_max,lon_max", s);
   double v[4];
   for (int i = 0; i < 4; ++i) {

@@ -1,7 +1,11 @@
 #include "gaia/data/video_io.h"
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -43,11 +47,13 @@ VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path
     return;
   }
   cap_ = std::make_unique<cv::VideoCapture>(path.string(), cv::CAP_FFMPEG);
-  if (!cap_->isOpened()) fail("{}: cannot open video (not a format FFmpeg decodes, or corrupt)", path.string());
+  if (!cap_->isOpened()) fail("{}: cannot open video (not a format FFmpeg decodes, or truncated or corrupt)", path.string());
   double fps = cap_->get(cv::CAP_PROP_FPS);
   fps_ = fps_override > 0 ? fps_override : fps;
   if (!(fps_ > 0) || fps_ > 1000) fail("{}: video reports no usable frame rate; pass --fps", path.string());
-  count_hint_ = static_cast<int64_t>(cap_->get(cv::CAP_PROP_FRAME_COUNT));
+  // Streams without an index report 0, a negative or a garbage count: treat anything implausible as "none".
+  const double count = cap_->get(cv::CAP_PROP_FRAME_COUNT);
+  count_hint_ = std::isfinite(count) && count > 0 && count < 1e12 ? static_cast<int64_t>(count) : 0;
   width_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_WIDTH));
   height_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_HEIGHT));
 }
@@ -99,8 +105,14 @@ void write_png(const fs::path& path, const cv::Mat& bgr) {
 
 void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, double fps) {
   if (frames.empty()) fail("{}: no frames to write", path.string());
-  if (path.has_parent_path()) fs::create_directories(path.parent_path());
-  fs::path tmp = path.parent_path() / (".tmp-" + unique_suffix() + path.extension().string());
+  const fs::path dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) fail("{}: cannot create directory {} ({})", path.string(), dir.string(), ec.message());
+  // Checked first: an encoder that cannot open its file says only that it failed.
+  if (::access(dir.c_str(), W_OK) != 0) fail("{}: cannot write into {} ({})", path.string(), dir.string(), std::strerror(errno));
+  // The encoder picks the container by extension, so the temporary name keeps it.
+  fs::path tmp = dir / (".tmp-" + path.stem().string() + "-" + unique_suffix() + path.extension().string());
   cv::Size size(frames[0].cols, frames[0].rows);
   cv::VideoWriter w;
   // H.264 first (plays everywhere); Debian's OpenCV/FFmpeg may lack an encoder, then MPEG-4 Part 2.
@@ -110,7 +122,17 @@ void write_video(const fs::path& path, const std::vector<cv::Mat>& frames, doubl
   if (!w.isOpened()) fail("{}: no video encoder available", path.string());
   for (auto& f : frames) w.write(f);
   w.release();
-  fs::rename(tmp, path);
+  // The encoder reports no write errors; an empty file is what a full disk leaves.
+  if (fs::file_size(tmp, ec) == 0 || ec) {
+    fs::remove(tmp, ec);
+    fail("{}: writing the video failed (disk full?)", path.string());
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    const std::string why = ec.message();
+    fs::remove(tmp, ec);
+    fail("{}: cannot rename the video into place ({})", path.string(), why);
+  }
 }
 
 std::vector<cv::Mat> read_frames_at_rate(const fs::path& path, double rate, int64_t count, int height, int width) {

@@ -24,7 +24,8 @@ class VideoSource {
   ~VideoSource();
   bool next(VideoFrame* out);  // false at the end
   double fps() const { return fps_; }
-  int64_t frame_count_hint() const { return count_hint_; }  // from the container; may be approximate
+  // The frame count the container states (0 when it states none); may be off by a frame or two.
+  int64_t frame_count_hint() const { return count_hint_; }
   int width() const { return width_; }
   int height() const { return height_; }
   const fs::path& path() const { return path_; }

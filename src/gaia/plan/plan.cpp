@@ -1,9 +1,12 @@
 #include "gaia/plan/plan.h"
 
+#include <algorithm>
 #include <cmath>
+#include <fstream>
 
 #include <fmt/format.h>
 
+#include "gaia/core/error.h"
 #include "gaia/eval/metrics.h"
 
 namespace gaia::plan {
@@ -203,6 +206,31 @@ std::string format_plan(const Plan& p, const Config& c) {
                    p.world_act_gb_per_seq, p.world_act_ckpt_gb_per_seq);
   s += fmt::format("tokenizer bit compression  H W 3 8 / (n log2 K) = {:.1f}\n", p.bit_compression);
   return s;
+}
+
+double rollout_memory_bytes(const Config& c, int64_t futures, int64_t steps, int passes, bool preview) {
+  const double B = double(futures) * std::max(passes, 1);
+  const double kv = 2.0 * c.world.n_layers * double(c.sequence_length()) * c.world.d_model * 4.0 * B;
+  const double logits = 4.0 * c.tokenizer.codebook_size * B * 4.0;  // a few copies while sampling
+  const double tokens = 8.0 * 2 * double(futures) * steps * c.image_tokens();
+  const double frames = preview ? 2.0 * double(futures) * steps * c.data.height * c.data.width * 3 : 0;
+  return kv + logits + tokens + frames;
+}
+
+double available_memory_bytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  double kb = 0;
+  std::string unit;
+  while (in >> key >> kb >> unit)
+    if (key == "MemAvailable:") return kb * 1024.0;
+  return 0;
+}
+
+void check_memory(double bytes, const std::string& what) {
+  const double have = available_memory_bytes();
+  if (have > 0 && bytes > have)
+    fail("{} would need about {:.1f} GB of memory, but {:.1f} GB are available", what, bytes / 1e9, have / 1e9);
 }
 
 }  // namespace gaia::plan

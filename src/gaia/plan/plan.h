@@ -36,6 +36,17 @@ struct Plan {
 };
 
 Plan make_plan(const Config& c);
+
+// Memory a rollout of `futures` futures over `steps` steps holds at its peak: the KV cache of every layer over
+// the context (times `passes`: 2 or 3 with classifier-free guidance), the logits of a token, the output tokens and,
+// with `preview`, the decoded preview frames.
+double rollout_memory_bytes(const Config& c, int64_t futures, int64_t steps, int passes, bool preview);
+
+// Bytes of memory available to this process now (MemAvailable); 0 when the system does not say.
+double available_memory_bytes();
+
+// Fails with one line saying what `what` would need against what is available, when it cannot fit.
+void check_memory(double bytes, const std::string& what);
 std::string format_plan(const Plan& p, const Config& c);  // human-readable table for the CLI
 
 }  // namespace gaia::plan

@@ -173,6 +173,7 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
                              const std::function<void(const std::string&)>& on_note) {
   const torch::Device dev = parse_device(cfg.run.device);
   ProbeTrainResult result;
+  train::RunDir run_dir(opt.out, on_note);  // one run per --out; a checkpoint a kill broke is put back
   data::Dataset ds(opt.dataset);
   auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
   auto val_ids = split.held_out();

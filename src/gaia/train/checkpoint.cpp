@@ -1,5 +1,7 @@
 #include "gaia/train/checkpoint.h"
 
+#include <sstream>
+
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
@@ -13,9 +15,13 @@ void save_checkpoint(const fs::path& dir, const std::vector<std::pair<std::strin
   StagingDir stage(dir);
   for (auto& [name, m] : modules) save_module(*m, stage.path() / (name + ".safetensors"));
   for (auto& [name, o] : optimizers) {
+    // Serialised in memory, written by write_file_atomic: LibTorch's file writer throws again from its destructor
+    // when the disk fills, which ends the process instead of giving an error line.
     torch::serialize::OutputArchive ar;
     o->save(ar);
-    ar.save_to((stage.path() / (name + ".optim.pt")).string());
+    std::ostringstream bytes;
+    ar.save_to(bytes);
+    write_file_atomic(stage.path() / (name + ".optim.pt"), bytes.str());
   }
   nlohmann::json j = {{"step", state.step}, {"extra", state.extra}};
   write_file_atomic(stage.path() / "state.json", j.dump(2) + "\n");
@@ -23,6 +29,50 @@ void save_checkpoint(const fs::path& dir, const std::vector<std::pair<std::strin
 }
 
 bool has_checkpoint(const fs::path& dir) { return fs::exists(dir / "state.json"); }
+
+namespace {
+int saved_step(const fs::path& dir) {
+  try {
+    return read_json(dir / "state.json").value("step", -1);
+  } catch (const std::exception&) {
+    return -1;  // unreadable: not a candidate
+  }
+}
+}  // namespace
+
+std::string recover_checkpoint(const fs::path& dir) {
+  const fs::path parent = dir.has_parent_path() ? dir.parent_path() : fs::path(".");
+  const std::string name = dir.filename().string();
+  std::string said;
+  if (!has_checkpoint(dir) && fs::is_directory(parent)) {
+    // Copies a kill can leave: StagingDir's ".tmp-NAME-PID-N" (complete once state.json, written last, is there)
+    // and "NAME.old-PID-N", the previous checkpoint moved aside.
+    fs::path best;
+    int best_step = -1;
+    for (auto& e : fs::directory_iterator(parent)) {
+      const std::string f = e.path().filename().string();
+      const bool ours = f.rfind(".tmp-" + name + "-", 0) == 0 || f.rfind(name + ".old-", 0) == 0;
+      const long pid = temporary_owner(f);
+      if (!ours || pid == 0 || process_alive(pid) || !has_checkpoint(e.path())) continue;
+      const int step = saved_step(e.path());
+      if (step > best_step) best_step = step, best = e.path();
+    }
+    if (!best.empty()) {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+      fs::rename(best, dir);
+      said = fmt::format("recovered the checkpoint of step {} from {} (a save was interrupted)", best_step,
+                         best.filename().string());
+    }
+  }
+  if (fs::is_directory(parent)) remove_stale_temporaries(parent);
+  return said;
+}
+
+RunDir::RunDir(const fs::path& out, const std::function<void(const std::string&)>& note) : out_(out), lock_(out) {
+  const std::string said = recover_checkpoint(checkpoint());
+  if (!said.empty() && note) note(said);
+}
 
 CheckpointState load_checkpoint(const fs::path& dir, const std::vector<std::pair<std::string, torch::nn::Module*>>& modules,
                                 const std::vector<std::pair<std::string, torch::optim::Optimizer*>>& optimizers) {

@@ -25,6 +25,23 @@ void save_checkpoint(const fs::path& dir, const std::vector<std::pair<std::strin
 // True if DIR holds a complete checkpoint.
 bool has_checkpoint(const fs::path& dir);
 
+// After a kill: if DIR is missing or incomplete but a complete copy of it survives beside it (a save's staging
+// directory, or the previous checkpoint moved aside), puts the newest one back as DIR. Then removes the leftovers of
+// dead runs. Returns what it did in a line ("" if nothing). Call it holding the run directory's lock (RunDir).
+std::string recover_checkpoint(const fs::path& dir);
+
+// Claims a training run's output directory for the life of the object: a lock (a second run on the same --out fails
+// at once, naming the first) and then recover_checkpoint(out/checkpoint), whose line goes to `note`.
+class RunDir {
+ public:
+  RunDir(const fs::path& out, const std::function<void(const std::string&)>& note);
+  fs::path checkpoint() const { return out_ / "checkpoint"; }
+
+ private:
+  fs::path out_;
+  DirLock lock_;
+};
+
 // Loads what save_checkpoint wrote into the same modules / optimisers; returns the state.
 CheckpointState load_checkpoint(const fs::path& dir, const std::vector<std::pair<std::string, torch::nn::Module*>>& modules,
                                 const std::vector<std::pair<std::string, torch::optim::Optimizer*>>& optimizers);

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "gaia/core/error.h"
+#include "gaia/plan/plan.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
@@ -47,8 +48,12 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     result.notes.push_back(s);
     if (on_note) on_note(s);
   };
+  // Weights, gradients and AdamW's two moments in float32, before any of it is allocated.
+  plan::check_memory(16.0 * double(plan::world_params(cfg).total), "training this world model (world.*)");
+  train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
 
-  TokenDataset ds(opt.tokens, 0);
+  // A directory states K in dataset.json; a bare token .npy takes it from the config, never from its largest id.
+  TokenDataset ds(opt.tokens, fs::is_directory(opt.tokens) ? 0 : cfg.tokenizer.codebook_size);
   const int64_t T = wc.context_steps;
   auto split = ds.split(0.1, cfg.run.seed);
   auto train_eps = ds.indices(split.train);
