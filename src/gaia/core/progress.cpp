@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <exception>
 
 #include <fmt/format.h>
 
@@ -15,7 +16,13 @@ ProgressBar::ProgressBar(int64_t total, std::string label, bool enabled, int64_t
 }
 
 ProgressBar::~ProgressBar() {
-  if (!finished_ && enabled_ && done_ > start_done_) finish();
+  if (finished_ || !enabled_ || done_ <= start_done_) return;
+  // Unwound by an error: end the bar's line so the error line that follows stands alone, without a "done" line.
+  if (std::uncaught_exceptions() > 0) {
+    if (tty_) std::fputs("\n", stderr);
+    return;
+  }
+  finish();
 }
 
 std::string ProgressBar::format_duration(double s) {
