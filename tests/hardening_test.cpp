@@ -169,6 +169,12 @@ TEST(Hardening, PromptStartAndTokenIdsAreChecked) {
   EXPECT_FALSE(fs::exists(dir / "g"));
   r = test::run_gaia(gen + " --start 3 --out " + q(dir / "g"));
   EXPECT_EQ(r.status, 0) << r.output;
+  // A tokenizer of another grid and codebook (the shipped 9 x 16, K = 1024, against this 4 x 8, K = 256) is refused
+  // before anything is generated or written, not decoded into a garbage preview.
+  r = test::run_gaia(gen + " --tokenizer " + q(test::source_dir() / "models" / "tokenizer.safetensors") + " --out " +
+                     q(dir / "mixed"));
+  expect_one_error_line(r, "tokenizer.safetensors: the tokenizer makes 9x16 tokens of K = 1024");
+  EXPECT_FALSE(fs::exists(dir / "mixed"));
   // A million futures do not fit in memory: refused up front with what they would need, nothing written.
   r = test::run_gaia(gen + " --futures 1000000 --out " + q(dir / "many"));
   expect_one_error_line(r, "--futures 1000000");
