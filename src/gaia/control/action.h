@@ -19,11 +19,11 @@ struct Command {
   double drift = 0;       // 1/m per generated frame added on top (a slow drift off the lane)
   bool out_of_distribution = false;
 };
-// straight, left, right (in distribution: |curvature| <= 0.012 1/m covers 99% of synth frames), strong-left,
-// strong-right (0.03 1/m, beyond the lane keeper's driving; only swerving drives turn this hard), drift-right (a
+// straight, left, right (gentle curves, within what the recorded drivers do), strong-left, strong-right (a 30 m
+// radius, beyond the lane keeper's driving; only swerving drives turn this hard), drift-right (a
 // growing pull off the lane, which the recorded driver never does), slow and fast (speed commands, straight).
 // "sweep": the steering response curve instead, turns of 8 to 40 1/km right and 8 to 30 1/km left at the kept speed,
-// to see where the model's read-back stops growing with the command (docs/evaluation.md, "Steering response").
+// to see where the model's read-back stops growing with the command.
 inline const std::vector<std::string> kCommandSets{"default", "sweep"};  // the sets action_commands() knows
 std::vector<Command> action_commands(const std::string& set = "default");
 

@@ -19,8 +19,8 @@ std::vector<TextTarget> text_targets();
 struct TextEvalOptions {
   int futures = 4;                                   // rollouts per target and setting
   int frames = 4;                                    // generated from scratch
-  // Guidance scales s; the last one also runs with the negative prompt and with the schedules. The shipped world
-  // model's weather accuracy is still rising at s = 4 and peaks around 8 (docs/evaluation.md, "Text control").
+  // Guidance scales s; the last one also runs with the negative prompt and with the schedules. The range reaches
+  // past the scales where text control usually saturates, so the curve shows where it stops rising.
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0, 8.0};
   world::SamplingOptions sampling;
   uint64_t seed = 0;

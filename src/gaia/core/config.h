@@ -74,7 +74,7 @@ struct TokenizerConfig {
 };
 
 struct WorldConfig {
-  // CPU-sized: ~2.5M parameters, ~2400 tokens/s on one core, the default recipe trains in ~2 h (MODEL_CARD.md).
+  // CPU-sized: a few M parameters, trainable on one CPU core (configs/paper.yaml holds the paper's 6.5B).
   int d_model = 192;             // d; paper §2.1: d = 4096
   int n_layers = 4;              // paper-scale 6.5B implies 32 layers at d = 4096 (12 d^2 per layer)
   int n_heads = 6;
@@ -85,8 +85,7 @@ struct WorldConfig {
   int action_tokens = 2;         // l; paper §2.1: speed and curvature
   // Hidden units of a small MLP (1 -> h -> d, GELU) added to each action's linear layer; 0 = the paper's linear
   // layer alone (§2.1). A linear embedding is one direction scaled by the value; the MLP lets left and right differ
-  // by more than a sign. Tried on the CPU model's misread strong right turns, it did not fix them
-  // (docs/evaluation.md, "Steering response"), so the shipped model has none.
+  // by more than a sign. The shipped model has none.
   int action_mlp = 0;
   double dropout = 0.0;
   // paper §4.2 conditioning mix: unconditional / action / text = 20% / 40% / 40%
@@ -94,12 +93,11 @@ struct WorldConfig {
   // Share of action-conditioned examples among windows of counterfactual replays (episodes with metadata replay_of,
   // `gaia synth counterfactuals`); the rest are unconditional or text-conditioned in the ratio above. -1 = the mix
   // above for every window. Replays show what a command does from a recorded state, so they teach action control;
-  // raising action conditioning on them alone keeps every other window's share of text examples. (On the CPU model
-  // that did not keep weather prompting either: docs/evaluation.md, "Counterfactual replays as training data".)
+  // raising action conditioning on them alone keeps every other window's share of text examples.
   double p_action_replay = -1;
   // paper §4.2 optimiser: AdamW lr 1e-4, wd 0.1, betas (0.9, 0.95), clip 1.0; 2.5k warm-up, cosine to lr/10
   // (batch 512 x 15860 tokens, 100k steps). The CPU recipe trains 3k steps of 4 x 1296 tokens, so, as for small
-  // GPTs, a higher rate with the same shape (the shipped model: models/MODEL_CARD.md).
+  // GPTs, a higher rate with the same shape.
   double lr = 6e-4, weight_decay = 0.1, beta1 = 0.9, beta2 = 0.95, grad_clip = 1.0, final_lr_ratio = 0.1;
   int warmup_steps = 100, steps = 3000, batch_size = 4;
   bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
@@ -140,14 +138,13 @@ struct DecoderConfig {
   int ddim_steps = 50;           // paper §5.2: 50 DDIM steps
   double mix_probability = 0.25, mix_weight = 0.5;  // paper §5.2 image/video eps mixing
   double noise_correlation = 0.0;  // sampler.h SampleOptions: starting noise shared between a window's frames
-  // sampler.h SampleOptions: temperature of the starting noise (paper: 1). The CPU decoder is 0.3-0.4 dB closer
-  // to the true frames at 0.5, with a lower temporal error, at 10, 20 and 50 DDIM steps (MODEL_CARD.md).
+  // sampler.h SampleOptions: temperature of the starting noise (paper: 1). A colder start keeps a small decoder's
+  // frames closer to the truth and steadier in time.
   double noise_scale = 0.5;
   // sampler.h SampleOptions: the noise level DDIM starts from (paper: 1, pure noise). Below 1 (needs cond_image)
   // the residual over the coarse frame starts at zero, noised to this level, so the sampler refines the coarse
-  // frame instead of drawing its detail from scratch (SDEdit, Meng et al. 2022). The CPU decoder at 0.3 is 0.75 dB
-  // closer to the true frames than at 1 (within 0.2 dB of the tokenizer decoder at 6.25 Hz), at 5 DDIM steps as
-  // well as 50, and sharper than the tokenizer decoder (MODEL_CARD.md, "Video decoder").
+  // frame instead of drawing its detail from scratch (SDEdit, Meng et al. 2022), which a CPU-sized decoder does
+  // better at few DDIM steps as well as many.
   double start_time = 0.3;
   // Training draws each window's noise level t ~ U(0, train_max_time) (paper: 1, every level). A sampler that
   // starts at start_time < 1 never asks the model about t above it, so a CPU-sized model can spend all of its

@@ -23,10 +23,9 @@ const std::vector<std::string>& time_classes();         // day, dusk, night
 const std::vector<std::string>& light_classes();        // none, green, amber, red
 int class_index(const std::vector<std::string>& classes, const std::string& name);  // -1 if unknown
 
-// Frames the dynamics probe reads by default: 4 (0.48 s). On the counterfactual replays of `gaia eval` a pair
-// (0.16 s) reads the commanded curvature at Spearman 0.85 / 92.5% of the steering signs, 4 frames at 0.96 / 100%
-// (docs/evaluation.md): gentle steering barely turns the road in one step. Files saved before the frame count was
-// recorded are pair probes.
+// Frames the dynamics probe reads by default: 4 (three world-model steps). Gentle steering barely turns the road
+// in one step, so a pair of frames reads a commanded curve less reliably than four. Files saved before the frame
+// count was recorded are pair probes.
 inline constexpr int64_t kDynamicsFrames = 4;
 
 // x [B, 3 * frames, H, W] in [-1, 1] -> features [B, width] (global average of the last conv block).

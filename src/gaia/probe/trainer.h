@@ -60,8 +60,8 @@ struct ProbeTrainOptions {
   int steps = 1500, batch = 32, val_every = 250, val_examples = 512, stop_after = -1;
   double lr = 1e-3;
   // A share of each batch read through this tokenizer (encoded, quantised, decoded): generated frames reach the
-  // probe through its decoder, and a probe trained on raw frames alone misses cues the decoder redraws (real rain
-  // read through it at 73%; docs/evaluation.md). Validation then also scores decoded held-out frames.
+  // probe through its decoder, and a probe trained on raw frames alone misses cues the decoder redraws (rain
+  // streaks, for one). Validation then also scores decoded held-out frames.
   fs::path tokenizer;
   double decoded_share = 0.5;
 };

@@ -18,8 +18,8 @@ struct SamplingOptions {
   double temperature = 1.0;
   // Guidance on the actions alone, with top-k: draw only from the conditional logits' top k, re-weighted by the
   // guided ones (keep_top_k below; the plausibility constraint of contrastive decoding, Li et al. 2023).
-  // Unconstrained, the scale steering needs (s = 16) turns rollouts to noise within a few frames. Text guidance is left free: at s = 4 the constraint cost weather prompts ~10 points (fog
-  // needs codes the conditional ranks low; docs/evaluation.md).
+  // Unconstrained, the large scales steering needs turn rollouts to noise within a few frames. Text guidance is
+  // left free: a weather change such as fog needs codes the conditional ranks low, which the constraint would cut.
   bool guide_actions_within_top_k = true;
 };
 
