@@ -16,7 +16,9 @@ namespace {
 
 Config bench_config() {
   Config c;  // default config
-  configure_allocator();
+  // GAIA_BENCH_GLIBC_MALLOC=1 keeps glibc's default allocator settings: what configure_allocator alone is worth.
+  const char* plain = std::getenv("GAIA_BENCH_GLIBC_MALLOC");
+  if (!plain || std::string(plain) != "1") configure_allocator();
   if (const char* t = std::getenv("GAIA_BENCH_THREADS")) set_torch_threads(std::atoi(t));
   return c;
 }

@@ -150,7 +150,7 @@ TEST(Plan, WorldModelCountFollowsTheGptFormula) {
   EXPECT_LT(def, 20000000);
 }
 
-TEST(Plan, CliPrintsPaperFigures) {
+TEST(PlanCli, PrintsPaperFigures) {
   auto r = test::run_gaia("plan '" + (test::source_dir() / "configs" / "paper.yaml").string() + "'");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("15860"), std::string::npos) << r.output;

@@ -17,6 +17,7 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 using namespace gaia::data;
 using test::error_of;
 
@@ -55,7 +56,6 @@ IngestOptions small() {
   return o;
 }
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 // The lines of the app's output that it says itself ("gaia: error: ...", "gaia: warning: ..."); the rest is
 // progress (a line per 10% when stderr is not a terminal).
@@ -167,7 +167,7 @@ TEST(DataHardening, SignalsMissingCellsStayMissingNeverInterpolatedAcross) {
   }
 }
 
-TEST(DataHardening, IngestGapsGiveNaNAtExactFramesAndLowCoverageWarns) {
+TEST(DataHardeningCli, IngestGapsGiveNaNAtExactFramesAndLowCoverageWarns) {
   test::TempDir dir;
   fs::path video = make_video(dir.path, 20);
   ASSERT_FALSE(video.empty());
@@ -227,7 +227,7 @@ TEST(DataHardening, IngestFailsWhenSignalsCoverNoFrame) {
   EXPECT_TRUE(fs::is_empty(dir / "ds" / "episodes"));  // no staging leftovers either
 }
 
-TEST(DataHardening, IngestRejectsBadFpsAndUnsafeIds) {
+TEST(DataHardeningCli, IngestRejectsBadFpsAndUnsafeIds) {
   test::TempDir dir;
   fs::path video = make_video(dir.path, 6);
   ASSERT_FALSE(video.empty());
@@ -290,7 +290,7 @@ TEST(DataHardening, WriterRemovesStagingDirsOfDeadProcessesOnly) {
   EXPECT_TRUE(fs::exists(episodes / "new" / "episode.json"));
 }
 
-TEST(DataHardening, TruncatedVideoFailsUnlessAllowPartial) {
+TEST(DataHardeningCli, TruncatedVideoFailsUnlessAllowPartial) {
   test::TempDir dir;
   fs::path video = make_video(dir.path, 100);
   ASSERT_FALSE(video.empty());
@@ -350,7 +350,7 @@ TEST(DataHardening, TruncatedVideoFailsUnlessAllowPartial) {
   EXPECT_TRUE(fs::exists(dir / "ds" / "episodes" / "cli" / "episode.json"));
 }
 
-TEST(DataHardening, TruncatedMp4IsOneClearError) {
+TEST(DataHardeningCli, TruncatedMp4IsOneClearError) {
   test::TempDir dir;
   fs::path video = make_video(dir.path, 100, "clip.mp4");
   if (video.empty() || fs::file_size(video) == 0) GTEST_SKIP() << "no MPEG-4 encoder in this OpenCV/FFmpeg";

@@ -16,27 +16,30 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
-
+// A tiny procedural dataset and a tokenizer trained on it, built once for the whole suite (test::shared_fixture);
+// each test writes its own outputs under `dir`.
 struct DecoderPipeline {
   test::TempDir dir;
   fs::path ds, tok;
   DecoderPipeline() {
-    ds = dir / "ds";
-    tok = dir / "tok";
-    auto r = test::run_gaia("synth --episodes 4 --seconds 3 --size 32x64 --seed 4 --out " + q(ds));
-    if (r.status != 0) throw std::runtime_error(r.output);
-    r = test::run_gaia("tokenizer train " + q(ds) + tiny() + " --steps 10 --out " + q(tok));
-    if (r.status != 0) throw std::runtime_error(r.output);
+    const fs::path shared = test::shared_fixture("decoder-cli", [&](const fs::path& d) {
+      auto r = test::run_gaia("synth --episodes 4 --seconds 3 --size 32x64 --seed 4 --out " + q(d / "ds"));
+      if (r.status != 0) throw std::runtime_error(r.output);
+      r = test::run_gaia("tokenizer train " + q(d / "ds") + tiny() + " --steps 10 --out " + q(d / "tok"));
+      if (r.status != 0) throw std::runtime_error(r.output);
+    });
+    ds = shared / "ds";
+    tok = shared / "tok";
   }
   static DecoderPipeline& get() {
     static DecoderPipeline p;
     return p;
   }
-  std::string tiny() const { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
+  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
   std::string tokenizer() const { return " --tokenizer " + q(tok / "tokenizer.safetensors"); }
 };
 

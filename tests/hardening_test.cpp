@@ -19,10 +19,10 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
 
 // Exactly one line that starts with "gaia: error:" and names `what`; exit status `status` (any non-zero if 0).
@@ -65,22 +65,13 @@ std::map<std::string, torch::Tensor> weights_of(const fs::path& p) {
 
 // Runs `gaia ARGS` under a file-size limit of `kib` KiB (a full disk, as far as the process can tell).
 test::RunResult run_gaia_with_file_limit(int kib, const std::string& args) {
-  const std::string cmd = "bash -c \"ulimit -f " + std::to_string(kib) + "; exec '" GAIA_BINARY "' " + args + "\" 2>&1";
-  test::RunResult r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
+  return test::run_shell("bash -c \"ulimit -f " + std::to_string(kib) + "; exec " + test::gaia_command(args) + "\" 2>&1");
 }
 
 }  // namespace
 
 // Head counts of 0 used to divide by zero (SIGFPE); each way in now names the key and its range.
-TEST(Hardening, ZeroHeadsAreRefusedFromEveryWayIn) {
+TEST(HardeningCli, ZeroHeadsAreRefusedFromEveryWayIn) {
   test::TempDir dir;
   expect_one_error_line(test::run_gaia("plan" + tiny() + " --set world.n_heads=0"), "world.n_heads");
   expect_one_error_line(test::run_gaia("plan" + tiny() + " --set decoder.heads=0"), "[1, 1024]");
@@ -118,7 +109,7 @@ TEST(Hardening, ZeroHeadsAreRefusedFromEveryWayIn) {
 
 // Numbers on the command line: NaN, infinities, negatives and values outside a flag's range are one usage line
 // (exit 2), and so are flags that exclude each other.
-TEST(Hardening, CommandLineNumbersAndExclusiveFlags) {
+TEST(HardeningCli, CommandLineNumbersAndExclusiveFlags) {
   test::TempDir dir;
   const std::string world = " --world " + q(test::source_dir() / "models" / "world.safetensors");
   const std::string out = " --out " + q(dir / "o");
@@ -141,7 +132,8 @@ TEST(Hardening, CommandLineNumbersAndExclusiveFlags) {
            {"world train x.npy --val-every -1" + out, "--val-every"},
            {"decode x.npy --tokenizer t --fast --ddim-steps 0" + out, "--ddim-steps"},
            {"decode x.npy --tokenizer t --decoder d --ddim-steps -3" + out, "--ddim-steps"},
-           {"generate" + world + " --tokens t --video v.mp4" + out, "--video"},
+           {"generate t" + world + " --video v.mp4" + out, "--video"},
+           {"generate" + world + " --tokens t --video v.mp4" + out, "--video"},  // the old spelling too
            {"decode x.npy --tokenizer t --fast --decoder d" + out, "--fast"},
            {"train-all data", "data"},
            {"world", "subcommand"},
@@ -158,12 +150,12 @@ TEST(Hardening, CommandLineNumbersAndExclusiveFlags) {
 
 // --start far outside the episode used to crash inside LibTorch; a K = 256 token file with a larger id is an error
 // naming the first bad position, not a bigger codebook.
-TEST(Hardening, PromptStartAndTokenIdsAreChecked) {
+TEST(HardeningCli, PromptStartAndTokenIdsAreChecked) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
   auto r = test::run_gaia("world train " + q(tokens) + tiny() + " --steps 1 --out " + q(dir / "w"));
   ASSERT_EQ(r.status, 0) << r.output;
-  const std::string gen = "generate --world " + q(dir / "w" / "world.safetensors") + " --tokens " + q(tokens) +
+  const std::string gen = "generate " + q(tokens) + " --world " + q(dir / "w" / "world.safetensors") +
                           " --episode 0 --frames 2 --threads 1";
   expect_one_error_line(test::run_gaia(gen + " --start 100000000 --out " + q(dir / "g")), "--start");
   EXPECT_FALSE(fs::exists(dir / "g"));
@@ -229,7 +221,7 @@ TEST(Hardening, RecoverCheckpointTakesTheNewestCompleteCopy) {
 
 // One run per output directory: a second one fails at once with one line naming the first's pid, and the lock
 // dies with its process.
-TEST(Hardening, RunDirectoryIsLockedForOneRun) {
+TEST(HardeningCli, RunDirectoryIsLockedForOneRun) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
   {
@@ -251,7 +243,7 @@ TEST(Hardening, RunDirectoryIsLockedForOneRun) {
 }
 
 // World-model training resumes bit for bit, from a checkpoint that a kill broke as well.
-TEST(Hardening, WorldTrainResumesExactlyAfterAKill) {
+TEST(HardeningCli, WorldTrainResumesExactlyAfterAKill) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
   const std::string train = "world train " + q(tokens) + tiny() + " --set run.checkpoint_every=2 --steps 6 --val-every 3";
@@ -275,7 +267,7 @@ TEST(Hardening, WorldTrainResumesExactlyAfterAKill) {
 
 // A full disk while the optimiser state is written used to abort the process and leave a torn file behind. Here a
 // file-size limit stands in for the full disk: the run fails with one line, the last checkpoint stays whole.
-TEST(Hardening, FullDiskDuringACheckpointIsOneErrorAndKeepsTheLastOne) {
+TEST(HardeningCli, FullDiskDuringACheckpointIsOneErrorAndKeepsTheLastOne) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
   const std::string train = "world train " + q(tokens) + tiny() + " --set run.checkpoint_every=1 --val-every 100";
@@ -307,7 +299,7 @@ TEST(Hardening, FullDiskDuringACheckpointIsOneErrorAndKeepsTheLastOne) {
 }
 
 // decode's MP4, GIF and PNG are one output: a full disk at the GIF leaves none of them, not an MP4 on its own.
-TEST(Hardening, DecodeOnAFullDiskLeavesNoPartialOutput) {
+TEST(HardeningCli, DecodeOnAFullDiskLeavesNoPartialOutput) {
   test::TempDir dir;
   std::vector<int16_t> v(10 * 9 * 16);
   for (size_t i = 0; i < v.size(); ++i) v[i] = int16_t((i * 37) % 1024);
@@ -328,4 +320,27 @@ TEST(Hardening, DecodeOnAFullDiskLeavesNoPartialOutput) {
   if (fs::exists(dir / "out"))
     for (auto& e : fs::directory_iterator(dir / "out")) left.push_back(e.path().filename().string());
   EXPECT_TRUE(left.empty()) << left.front();
+}
+
+// An output directory on a read-only file system is one error line naming it, not the encoder's "no video encoder
+// available". Root (CI runs as root) passes every permission check, so the directory is a tmpfs mounted read-only
+// in a private mount namespace that ends with the command.
+TEST(HardeningCli, DecodeIntoAReadOnlyDirectoryNamesIt) {
+  if (test::run_shell("unshare -m true 2>&1").status != 0)
+    GTEST_SKIP() << "a read-only directory needs a private mount namespace (unshare -m, as root)";
+  test::TempDir dir;
+  std::vector<int16_t> v(4 * 9 * 16, 7);
+  npy_write(dir / "tokens.npy", npy_make(DType::I16, {4, 9, 16}, v));
+  fs::create_directories(dir / "ro");
+  const std::string decode = "decode " + q(dir / "tokens.npy") + " --tokenizer " +
+                             q(test::source_dir() / "models" / "tokenizer.safetensors") + " --fast --threads 1 --out " +
+                             q(dir / "ro" / "v.mp4");
+  auto r = test::run_shell("unshare -m bash -c \"mount -t tmpfs -o ro,size=1m tmpfs " + q(dir / "ro") + " && exec " +
+                           test::gaia_command(decode) + "\" 2>&1");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "ro").string()), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Read-only file system"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("encoder"), std::string::npos) << r.output;
 }

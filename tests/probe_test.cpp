@@ -1,5 +1,7 @@
 // Evaluation probes: Frechet distance and Spearman against closed forms, shapes, learning on procedural data,
 // exact resume through the CLI, and bad inputs.
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
@@ -14,9 +16,9 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 
 namespace {
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 }  // namespace
 
 TEST(Probe, FrechetDistanceClosedForms) {
@@ -96,7 +98,7 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
   ASSERT_EQ(r.status, 0) << r.output;
   const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2";
   for (std::string kind : {"scene", "dynamics"}) {
-    const std::string base = "probe train " + kind + " " + q(d / "ds") + tiny + " --steps 40 --batch 16 --val-every 20";
+    const std::string base = "probe train " + kind + " " + q(d / "ds") + tiny + " --steps 40 --batch 16 --val-every 20";  // --batch: the old spelling of --batch-size
     r = test::run_gaia(base + " --out " + q(d / (kind + "-a")));
     ASSERT_EQ(r.status, 0) << r.output;
     r = test::run_gaia(base + " --stop-after 20 --out " + q(d / (kind + "-b")));
@@ -115,7 +117,7 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
     double first = 0, last = 0;
     for (int i = 0; i < 10; ++i) first += loss[size_t(i)], last += loss[loss.size() - 1 - size_t(i)];
     EXPECT_LT(last, 0.8 * first) << kind;
-    r = test::run_gaia("probe eval " + q(d / (kind + "-a") / w) + " " + q(d / "ds") + tiny + " --examples 32");
+    r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(d / (kind + "-a") / w) + tiny + " --examples 32");
     ASSERT_EQ(r.status, 0) << r.output;
     EXPECT_NE(r.output.find(kind == "scene" ? "weather_accuracy" : "steering_sign_accuracy"), std::string::npos) << r.output;
   }
@@ -138,19 +140,24 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
       EXPECT_NEAR(y[int64_t(i)][1].item<double>(), cu / world::kCurvatureScale, 1e-4);
     }
   }
-  r = test::run_gaia("probe train dynamics " + q(d / "ds") + tiny + " --frames 3 --steps 4 --batch 4 --out " + q(d / "dyn3"));
+  r = test::run_gaia("probe train dynamics " + q(d / "ds") + tiny + " --frames 3 --steps 4 --batch-size 4 --out " + q(d / "dyn3"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(SafetensorsFile(d / "dyn3" / "probe-dynamics.safetensors").metadata().at("gaia.probe.frames"), "3");
   EXPECT_EQ(probe::load_probe(d / "dyn3" / "probe-dynamics.safetensors", torch::kCPU)->frames, 3);
+  // The old spelling (weights first, positional) still works for a release, and says what to write instead.
   r = test::run_gaia("probe eval " + q(d / "dyn3" / "probe-dynamics.safetensors") + " " + q(d / "ds") + tiny + " --examples 8");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("\"frames\": 3"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("use DATASET --probe WEIGHTS"), std::string::npos) << r.output;
+  r = test::run_gaia("probe eval " + q(d / "ds") + tiny);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--probe WEIGHTS is required"), std::string::npos) << r.output;
   r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --frames 2 --steps 4 --out " + q(d / "scene2"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("scene probe: reads one frame"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "scene2" / "probe-scene.safetensors"));
 
-  r = test::run_gaia("probe eval " + q(d / "ds" / "dataset.json") + " " + q(d / "ds") + tiny);
+  r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(d / "ds" / "dataset.json") + tiny);
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("dataset.json"), std::string::npos) << r.output;
 }
@@ -189,7 +196,7 @@ TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   EXPECT_FALSE(torch::equal(all[1], x[1]));
 
   const std::string base = "probe train scene " + q(d / "ds") + tiny + " --tokenizer " + q(tok_file) +
-                           " --decoded-share 0.5 --steps 8 --batch 8 --val-every 4";
+                           " --decoded-share 0.5 --steps 8 --batch-size 8 --val-every 4";
   r = test::run_gaia(base + " --out " + q(d / "a"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = test::run_gaia(base + " --stop-after 4 --out " + q(d / "b"));
@@ -212,11 +219,11 @@ TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   }
   EXPECT_EQ(validated, 2);
   // Without --tokenizer the file says no frame was decoded.
-  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 2 --batch 4 --out " + q(d / "raw"));
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 2 --batch-size 4 --out " + q(d / "raw"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(SafetensorsFile(d / "raw" / w).metadata().at("gaia.probe.decoded_share"), "0");
 
-  r = test::run_gaia("probe eval " + q(d / "a" / w) + " " + q(d / "ds") + tiny + " --examples 16 --tokenizer " + q(tok_file));
+  r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(d / "a" / w) + tiny + " --examples 16 --tokenizer " + q(tok_file));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
   EXPECT_EQ(j["decoded"]["examples"].get<int>(), j["examples"].get<int>());
@@ -238,4 +245,18 @@ TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   EXPECT_NE(r.output.find("tokenizer.safetensors"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("32x64"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "e" / w));
+}
+
+// Held-out drives too short for what a probe reads (0.2 s, while the dynamics probe spans 4 world-model steps)
+// are one error line naming the dataset, not LibTorch's complaint about an empty list.
+TEST(ProbeCli, EvalOnDrivesTooShortForTheProbeIsOneLine) {
+  test::TempDir d;
+  test::synth_dataset(d / "ds", 3, 0.2);
+  auto r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " +
+                          q(test::source_dir() / "models" / "probe-dynamics.safetensors") + " --threads 1");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find("no held-out episode is long enough for this probe"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find((d / "ds").string()), std::string::npos) << r.output;
 }

@@ -230,7 +230,7 @@ TEST(Report, ErrorsNameTheFieldAndFile) {
       << report_error(d.path);
 }
 
-TEST(Report, CliWritesThePageOrOneErrorLineAndNothing) {
+TEST(ReportCli, WritesThePageOrOneErrorLineAndNothing) {
   test::TempDir d;
   make_run(d.path);
   auto ok = test::run_gaia("report '" + d.path.string() + "'");

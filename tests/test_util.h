@@ -2,6 +2,11 @@
 // Shared test helpers: a scratch directory per test, running the gaia binary, and locating the real clips.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <array>
 #include <cstdio>
 #include <functional>
@@ -42,14 +47,28 @@ inline void synth_dataset(const fs::path& dir, int count, double seconds, int fi
   for (int e = first; e < first + count; ++e) synth::write_episode(dir, o, e);
 }
 
+// A path quoted for the shell command lines run_gaia takes.
+inline std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+
+// The test tiers (ctest labels, set in CMakeLists.txt): a test that runs the gaia binary lives in a suite named
+// *Cli (label cli) or *Slow (label slow); every other suite is label unit, so `ctest -L unit` never spawns it.
+inline bool may_run_binary() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  if (!info) return true;  // a global environment
+  const std::string s = info->test_suite_name();
+  auto ends = [&](const std::string& suffix) {
+    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  return ends("Cli") || ends("Slow");
+}
+
 struct RunResult {
   int status = -1;
   std::string output;  // stdout and stderr together
 };
 
-// Runs `gaia ARGS` through the shell and captures its output and exit code.
-inline RunResult run_gaia(const std::string& args) {
-  std::string cmd = std::string("'") + GAIA_BINARY + "' " + args + " 2>&1";
+// Runs a shell command line and captures what it prints (add 2>&1 for stderr) and its exit code.
+inline RunResult run_shell(const std::string& cmd) {
   RunResult r;
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -60,6 +79,16 @@ inline RunResult run_gaia(const std::string& args) {
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
 }
+
+// `'gaia' ARGS` for a shell command line (a test that wraps the binary: ulimit, unshare).
+inline std::string gaia_command(const std::string& args) {
+  if (!may_run_binary())
+    ADD_FAILURE() << "a unit test runs the gaia binary: move it to a suite named *Cli or *Slow (see test_util.h)";
+  return std::string("'") + GAIA_BINARY + "' " + args;
+}
+
+// Runs `gaia ARGS` through the shell and captures its output (stdout and stderr together) and exit code.
+inline RunResult run_gaia(const std::string& args) { return run_shell(gaia_command(args) + " 2>&1"); }
 
 // The message of the gaia::Error that f throws, or "" if it throws none.
 inline std::string error_of(const std::function<void()>& f) {
@@ -81,6 +110,32 @@ inline std::vector<double> jsonl_numbers(const fs::path& metrics, const std::str
 }
 
 inline fs::path source_dir() { return fs::path(GAIA_SOURCE_DIR); }
+
+// A directory that `build` fills once and every test process then shares read-only (a trained tiny tokenizer, a
+// token dataset): ctest runs each test in its own process, and rebuilding such inputs in each was most of the
+// suite's time. The first process to ask builds it under an exclusive lock while the others wait; it is built again
+// when the gaia binary is newer than it. Tests write their outputs elsewhere (a TempDir).
+inline fs::path shared_fixture(const std::string& name, const std::function<void(const fs::path&)>& build) {
+  const fs::path root = GAIA_TEST_FIXTURE_DIR;
+  fs::create_directories(root);
+  const fs::path dir = root / name, stamp = dir / ".built-for";
+  struct stat st{};
+  const std::string binary = ::stat(GAIA_BINARY, &st) == 0 ? std::to_string(st.st_mtim.tv_sec) + "." +
+                                                                std::to_string(st.st_mtim.tv_nsec) + " " + std::to_string(st.st_size)
+                                                          : "none";
+  const int fd = ::open((root / (name + ".lock")).c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644);
+  if (fd < 0 || ::flock(fd, LOCK_EX) != 0) throw std::runtime_error("cannot lock the test fixture " + dir.string());
+  struct Unlock {
+    int fd;
+    ~Unlock() { ::close(fd); }  // closing drops the lock
+  } unlock{fd};
+  if (fs::exists(stamp) && read_file(stamp) == binary) return dir;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  build(dir);
+  write_file_atomic(stamp, binary);
+  return dir;
+}
 
 // The shared real driving clips live beside the repository (../shared/data/real); GAIA_REAL_DATA overrides.
 inline fs::path real_data_dir() {

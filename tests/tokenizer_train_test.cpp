@@ -288,7 +288,7 @@ TEST(TokenizerTrain, EmaAveragesTheDecoderResumesExactlyAndKeepsTheCodes) {
   EXPECT_GT(differ, 10);  // an average of steps 7..12, not the last step's weights
 }
 
-TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
+TEST(TokenizerTrainCli, TokenizeAlignsActionsAndResumes) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 2.0);  // 50 frames at 25 Hz -> 13 steps at 6.25 Hz
   train_two_steps(dir / "ds", dir / "run");
@@ -329,7 +329,7 @@ TEST(TokenizerTrain, TokenizeAlignsActionsAndResumes) {
   EXPECT_EQ(read_file(dir / "tok" / "dataset.json"), "{\"grid\": [4,");
 }
 
-TEST(TokenizerEval, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {
+TEST(TokenizerEvalCli, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {
   test::TempDir dir;
   make_dataset(dir / "ds", 24, 0.4);  // 24 x 10 frames; the default split holds out ~10%
   data::Dataset ds(dir / "ds");
@@ -396,7 +396,7 @@ TEST(TokenizerEval, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {
   EXPECT_EQ(e["by_weather"].size(), weathers.size());
 }
 
-TEST(TokenizerTrain, BadInputsAreClearErrors) {
+TEST(TokenizerTrainCli, BadInputsAreClearErrors) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 0.2);
   auto r = test::run_gaia("tokenizer train '" + (dir / "ds").string() + "' --out '" + (dir / "run").string() + "'");

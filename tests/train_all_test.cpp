@@ -13,9 +13,9 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 
 namespace {
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 int count(const std::string& s, const std::string& what) {
   int n = 0;
   for (size_t at = s.find(what); at != std::string::npos; at = s.find(what, at + 1)) ++n;
@@ -23,7 +23,7 @@ int count(const std::string& s, const std::string& what) {
 }
 }  // namespace
 
-TEST(TrainAll, RunsEveryStageShipsAndResumes) {
+TEST(TrainAllSlow, RunsEveryStageShipsAndResumes) {
   test::TempDir d;
   const std::string cmd = "train-all --config " + q(test::source_dir() / "configs" / "tiny.yaml") +
                           " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 4 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"

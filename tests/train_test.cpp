@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/core/progress.h"
+#include "gaia/train/checkpoint.h"
 #include "gaia/train/step_loop.h"
 #include "test_util.h"
 
@@ -49,4 +50,20 @@ TEST(StepLoop, ResumeDropsRecordsPastTheCheckpoint) {
   // A fresh run (step 0) in a directory with an old curve starts a new one.
   { train::StepLoop fresh(f, 0, 5, 0, -1); }
   EXPECT_EQ(read_file(f), "");
+}
+
+// Fine-tuning (--init): every tensor of the run's model comes from the file; a tensor the file has and the run's
+// config lacks is dropped and said (init_from's note), never silently; one the run has and the file lacks fails
+// unless the run marks it fresh.
+TEST(InitFrom, CopiesByNameAndSaysWhatItDrops) {
+  torch::nn::Sequential small(torch::nn::Linear(3, 4)), big(torch::nn::Linear(3, 4), torch::nn::Linear(4, 2));
+  torch::nn::init::constant_(big[0]->as<torch::nn::Linear>()->weight, 0.5);
+  EXPECT_EQ(train::init_from(*small, *small, "same.safetensors"), "");
+  const std::string note = train::init_from(*small, *big, "big.safetensors");
+  EXPECT_TRUE(torch::equal(small[0]->as<torch::nn::Linear>()->weight, torch::full({4, 3}, 0.5)));
+  EXPECT_NE(note.find("big.safetensors: 2 tensors"), std::string::npos) << note;
+  EXPECT_NE(note.find("'1.weight'"), std::string::npos) << note;
+  EXPECT_NE(test::error_of([&] { train::init_from(*big, *small, "small.safetensors"); }).find("small.safetensors: no tensor '1."),
+            std::string::npos);
+  EXPECT_EQ(train::init_from(*big, *small, "small.safetensors", [](const std::string& k) { return k.rfind("1.", 0) == 0; }), "");
 }

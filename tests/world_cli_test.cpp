@@ -15,33 +15,41 @@
 #include "test_util.h"
 
 using namespace gaia;
+using test::q;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
-
-// One shared pipeline for the tests below (built once: tokenizer and world model training take a few seconds).
+// The inputs the tests below share, built once for the whole suite (test::shared_fixture): a tiny procedural
+// dataset, a tokenizer trained on it, its token dataset and a world model trained 10 steps on those tokens. Each
+// test writes its own outputs under `dir`.
 struct Pipeline {
   test::TempDir dir;
-  fs::path ds, tok, tokens, run;
+  fs::path ds, tok, tokens, run, trained;
   Pipeline() {
-    ds = dir / "ds";
-    tok = dir / "tok";
-    tokens = dir / "tokens";
+    const fs::path shared = test::shared_fixture("world-cli", [&](const fs::path& d) {
+      auto r = test::run_gaia("synth --episodes 6 --seconds 4 --size 32x64 --seed 3 --out " + q(d / "ds"));
+      if (r.status != 0) throw std::runtime_error(r.output);
+      r = test::run_gaia("tokenizer train " + q(d / "ds") + tiny() + " --steps 20 --out " + q(d / "tok"));
+      if (r.status != 0) throw std::runtime_error(r.output);
+      r = test::run_gaia("tokenize " + q(d / "ds") + " --tokenizer " + q(d / "tok" / "tokenizer.safetensors") + tiny() +
+                         " --out " + q(d / "tokens"));
+      if (r.status != 0) throw std::runtime_error(r.output);
+    });
+    ds = shared / "ds";
+    tok = shared / "tok";
+    tokens = shared / "tokens";
     run = dir / "world";
-    const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2";
-    auto r = test::run_gaia("synth --episodes 6 --seconds 4 --size 32x64 --seed 3 --out " + q(ds));
-    if (r.status != 0) throw std::runtime_error(r.output);
-    r = test::run_gaia("tokenizer train " + q(ds) + tiny + " --steps 20 --out " + q(tok));
-    if (r.status != 0) throw std::runtime_error(r.output);
-    r = test::run_gaia("tokenize " + q(ds) + " --tokenizer " + q(tok / "tokenizer.safetensors") + tiny + " --out " + q(tokens));
-    if (r.status != 0) throw std::runtime_error(r.output);
+    trained = test::shared_fixture("world-cli-trained", [&](const fs::path& d) {
+                auto r = test::run_gaia("world train " + q(tokens) + tiny() + " --steps 10 --val-every 10 --out " + q(d));
+                if (r.status != 0) throw std::runtime_error(r.output);
+              }) /
+              "world.safetensors";
   }
   static Pipeline& get() {
     static Pipeline p;
     return p;
   }
-  std::string tiny() const { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
+  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
 };
 
 }  // namespace
@@ -109,7 +117,7 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
 
   // Two futures steered left from an episode prompt, with text and guidance, decoded into a preview.
   r = test::run_gaia("generate --world " + q(p.run / "world.safetensors") + " --tokenizer " + q(p.tok / "tokenizer.safetensors") +
-                     " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 5 --futures 2 --steer left" +
+                     " " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 5 --futures 2 --steer left" +
                      " --text 'night, heavy rain' --guidance 2 --guidance-frames cosine --guidance-tokens linear" +
                      p.tiny() + " --seed 1 --out " + q(p.dir / "gen"));
   ASSERT_EQ(r.status, 0) << r.output;
@@ -128,16 +136,12 @@ TEST(WorldCli, TrainResumesEvaluatesAndGenerates) {
 
 TEST(WorldCli, BadInputsAreClearErrors) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {  // ctest runs each test in its own process: train here
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
-  const std::string w = " --world " + q(p.run / "world.safetensors") + p.tiny();
+  const std::string w = " --world " + q(p.trained) + p.tiny();
   write_file_atomic(p.dir / "two.csv", "speed,curvature\n5,0\n5,0.01\n");
   auto r = test::run_gaia("generate" + w + " --frames 3 --actions " + q(p.dir / "two.csv") + " --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("two.csv: 2 action rows but --frames is 3"), std::string::npos) << r.output;
-  r = test::run_gaia("generate" + w + " --tokens " + q(p.tokens) + " --prompt-frames 9 --frames 1 --out " + q(p.dir / "x"));
+  r = test::run_gaia("generate" + w + " " + q(p.tokens) + " --prompt-frames 9 --frames 1 --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("context holds 4 steps"), std::string::npos) << r.output;
   // A token file with ids >= K.
@@ -166,11 +170,11 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
   // The temperature stored with the model is generate's default: a file converted to 0.5 samples what --temperature
   // 0.5 and --set world.temperature=0.5 sample from the original.
-  r = test::run_gaia("convert " + q(p.run / "world.safetensors") + " --set world.temperature=0.5 --out " + q(p.dir / "warm.safetensors"));
+  r = test::run_gaia("convert " + q(p.trained) + " --set world.temperature=0.5 --out " + q(p.dir / "warm.safetensors"));
   ASSERT_EQ(r.status, 0) << r.output;
-  const std::string roll = " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2 --seed 4";
+  const std::string roll = " " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2 --seed 4";
   std::vector<torch::Tensor> warm;
-  const std::string orig = " --world " + q(p.run / "world.safetensors");
+  const std::string orig = " --world " + q(p.trained);
   for (const std::string& how : {" --world " + q(p.dir / "warm.safetensors"), orig + " --temperature 0.5",
                                  orig + " --set world.temperature=0.5"}) {
     r = test::run_gaia("generate" + how + p.tiny() + roll + " --out " + q(p.dir / "warm"));
@@ -180,7 +184,7 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   EXPECT_TRUE(torch::equal(warm[0], warm[1]));
   EXPECT_TRUE(torch::equal(warm[0], warm[2]));
   // ... but its sampling key reaches the sampler: with k = 1 two futures of one prompt are the same.
-  r = test::run_gaia("generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2" +
+  r = test::run_gaia("generate" + w + " " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2 --futures 2" +
                      " --set world.top_k=1 --seed 3 --out " + q(p.dir / "k1"));
   ASSERT_EQ(r.status, 0) << r.output;
   SafetensorsFile f(p.dir / "k1" / "rollout.safetensors");
@@ -188,7 +192,7 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   EXPECT_TRUE(torch::equal(t[0], t[1]));
   // Steering guidance contrasts the command with its mirror image by default, with null actions on request (which
   // frames that gives is WorldRollout.NegativeActionsReplaceTheNullOnes; this barely trained model may not show it).
-  const std::string steer = "generate" + w + " --tokens " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2" +
+  const std::string steer = "generate" + w + " " + q(p.tokens) + " --episode 0 --prompt-frames 2 --frames 2" +
                             " --steer strong-left --guidance 30 --sampling argmax --out ";
   r = test::run_gaia(steer + q(p.dir / "mirror"));
   ASSERT_EQ(r.status, 0) << r.output;
@@ -207,14 +211,10 @@ TEST(WorldCli, BadInputsAreClearErrors) {
 // captions would give another one (here a bare token file without captions); an architecture mismatch is an error.
 TEST(WorldCli, FineTuneStartsFromInitWeightsAndKeepsTheirVocabulary) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
   fs::path first;
   for (auto& e : fs::directory_iterator(p.tokens / "episodes")) first = std::max(first, e.path());
   fs::copy_file(first / "tokens.npy", p.dir / "bare.npy", fs::copy_options::overwrite_existing);
-  const fs::path init = p.run / "world.safetensors", ft = p.dir / "finetune";
+  const fs::path init = p.trained, ft = p.dir / "finetune";
   // lr 0: AdamW leaves every weight exactly where --init put it.
   auto r = test::run_gaia("world train " + q(p.dir / "bare.npy") + p.tiny() + " --init " + q(init) +
                           " --set world.lr=0 --steps 2 --val-every 100 --out " + q(ft));
@@ -257,11 +257,7 @@ TEST(WorldCli, FineTuneStartsFromInitWeightsAndKeepsTheirVocabulary) {
 // error line.
 TEST(WorldCli, FineTuneTrainsOnlyTheNamedParameters) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
-  const fs::path init = p.run / "world.safetensors", ft = p.dir / "action-mlp";
+  const fs::path init = p.trained, ft = p.dir / "action-mlp";
   auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --init " + q(init) +
                           " --set world.action_mlp=16 --set world.lr=1e-2 --set world.warmup_steps=0"
                           " --train-only curvature_proj,curvature_mlp --steps 3 --val-every 100 --out " + q(ft));
@@ -309,11 +305,7 @@ TEST(WorldCli, FineTuneTrainsOnlyTheNamedParameters) {
 // --distill-other-text without a teacher or without captions are one error line each, with nothing written.
 TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
-  const fs::path init = p.run / "world.safetensors";
+  const fs::path init = p.trained;
   const std::string base = "world train " + q(p.tokens) + p.tiny() + " --init " + q(init) + " --distill-from " +
                            q(init) + " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2" +
                            " --set world.p_text=0.6 --steps 5 --val-every 100 --distill-other-text";
@@ -376,16 +368,12 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
 // from the model's own bias). Bad flags are one error line with nothing written.
 TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
   auto parse = [](const std::string& out, const std::string& after) {
     auto at = out.find(after);
     EXPECT_NE(at, std::string::npos) << out;
     return at == std::string::npos ? NAN : std::stod(out.substr(at + after.size()));
   };
-  auto r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+  auto r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() +
                           " --max-windows 16 --out " + q(p.dir / "cal.safetensors"));
   ASSERT_EQ(r.status, 0) << r.output;
   const double bias = parse(r.output, "world.copy_bias ");
@@ -403,11 +391,11 @@ TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
   EXPECT_NEAR(parse(r.output, "(was "), bias, 1e-4) << r.output;
 
   // --without-meta leaves out the episodes with that key: every synth drive has a synth_index.
-  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() +
                      " --without-meta synth_index --out " + q(p.dir / "bad.safetensors"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("in the episodes without synth_index"), std::string::npos) << r.output;
-  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+  r = test::run_gaia("world calibrate " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() +
                      " --max-windows 0 --out " + q(p.dir / "bad.safetensors"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--max-windows must be >= 1"), std::string::npos) << r.output;
@@ -418,17 +406,13 @@ TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
 // every part runs, the numbers are where they must be, and the report is written.
 TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   auto& p = Pipeline::get();
-  if (!fs::exists(p.run / "world.safetensors")) {
-    auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 10 --val-every 10 --out " + q(p.run));
-    ASSERT_EQ(r.status, 0) << r.output;
-  }
   const fs::path models = test::source_dir() / "models";
-  const std::string base = "eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + " --tokenizer " +
+  const std::string base = "eval " + q(p.tokens) + " --world " + q(p.trained) + " --tokenizer " +
                            q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " +
                            q(models / "probe-dynamics.safetensors") + " --scene-probe " +
                            q(models / "probe-scene.safetensors") + p.tiny();
   const int64_t K = probe::load_probe(models / "probe-dynamics.safetensors", torch::kCPU)->frames;
-  auto r = test::run_gaia(base + " --dataset " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames " +
+  auto r = test::run_gaia(base + " " + q(p.ds) + " --prompts 2 --prompt-frames 2 --frames " +
                           std::to_string(K - 1) + " --futures 2" +
                           " --text-frames 1 --scales 0,2 --long-seconds 2 --window-seconds 1 --long-rollouts 2 --action-guidance 1.5 --out " +
                           q(p.dir / "eval"));
@@ -562,7 +546,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
 
   // --set world.temperature reaches the sampler: the same long rollout, sharper distributions, other tokens.
   // With --world-eval the likelihood figures and both Fig. 5 plots join the report.
-  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + p.tiny() +
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() +
                      " --max-windows 2 --sweep-windows 1 --out " + q(p.dir / "world-eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --set world.temperature=0.3 --set world.guide_actions_within_top_k=false"
@@ -608,7 +592,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   r = test::run_gaia(base + " --only action,bogus --out " + q(p.dir / "bad"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--only: unknown part 'bogus'"), std::string::npos) << r.output;
-  r = test::run_gaia("eval " + q(p.tokens) + " --world " + q(p.run / "world.safetensors") + " --tokenizer " +
+  r = test::run_gaia("eval " + q(p.tokens) + " --world " + q(p.trained) + " --tokenizer " +
                      q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " + q(models / "probe-scene.safetensors") +
                      " --scene-probe " + q(models / "probe-scene.safetensors") + p.tiny() + " --out " + q(p.dir / "bad"));
   EXPECT_NE(r.status, 0);

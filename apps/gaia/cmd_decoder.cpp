@@ -82,7 +82,7 @@ void register_decoder(CLI::App& app) {
     auto o = std::make_shared<decoder::DecoderTrainOptions>();
     auto dataset = std::make_shared<std::string>(), tok = std::make_shared<std::string>();
     cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
-    cmd->add_option("--tokenizer", *tok, "tokenizer weights (frozen; gives the conditioning tokens)")->required();
+    add_weights_flag(cmd, Weights::Tokenizer, tok.get(), "frozen; gives the conditioning tokens")->required();
     cmd->add_option("--steps", o->steps, "total steps (default: config decoder.steps)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init, "start from these video decoder weights (fine-tuning; ignored when resuming)");
     cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
@@ -120,8 +120,8 @@ void register_decoder(CLI::App& app) {
          weights = std::make_shared<std::string>(), steps = std::make_shared<std::string>("50,20,10");
     auto eo = std::make_shared<decoder::DecoderEvalOptions>();
     cmd->add_option("DATASET", *dataset, "episode dataset (its validation episodes are decoded)")->required();
-    cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)")->required();
-    cmd->add_option("--tokenizer", *tok, "tokenizer weights")->required();
+    add_weights_flag(cmd, Weights::Decoder, weights.get())->required();
+    add_weights_flag(cmd, Weights::Tokenizer, tok.get())->required();
     cmd->add_option("--clips", eo->clips, "held-out clips")->check(number_in({1, 1e6}));
     cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip")->check(number_in({2, 1e6}));
     cmd->add_option("--steps", *steps, "DDIM step counts to compare, e.g. 50,20,10");
@@ -130,10 +130,9 @@ void register_decoder(CLI::App& app) {
                     "or 25 (every frame's own, as the tokenizer decoder gets them)");
     auto world_path = std::make_shared<std::string>();
     auto prompt_frames = std::make_shared<int>(3);
-    cmd->add_option("--world", *world_path,
-                    "decode world-model rollouts instead of the true tokens: the clip's first --prompt-frames token "
-                    "frames and its recorded actions prompt the world model (top-k 50, no guidance), both decoders "
-                    "decode what it generates");
+    add_weights_flag(cmd, Weights::World, world_path.get(),
+                     "decode its rollouts instead of the true tokens: the clip's first --prompt-frames token frames and "
+                     "its recorded actions prompt it (top-k 50, no guidance), both decoders decode what it generates");
     cmd->add_option("--prompt-frames", *prompt_frames, "with --world: true token frames before the generated ones")
         ->needs(cmd->get_option("--world"));
     add_shared_flags(cmd, flags.get(), "output directory (eval.json)");
@@ -202,8 +201,9 @@ void register_decode(CLI::App& app) {
   auto fps = std::make_shared<double>(25.0), token_fps = std::make_shared<double>(6.25);
   cmd->add_option("TOKENS", *tokens, "rollout.safetensors (gaia generate), tokens .npy [N, h, w], or a token episode dir")
       ->required();
-  cmd->add_option("--tokenizer", *tok, "tokenizer weights (its decoder for --fast and the decoder's conditioning)")->required();
-  auto* decoder_opt = cmd->add_option("--decoder", *weights, "video decoder weights (decoder.safetensors)");
+  add_weights_flag(cmd, Weights::Tokenizer, tok.get(), "its decoder for --fast and the video decoder's conditioning")
+      ->required();
+  auto* decoder_opt = add_weights_flag(cmd, Weights::Decoder, weights.get());
   cmd->add_flag("--fast", *fast, "decode frame by frame with the tokenizer's decoder (a quick preview)")
       ->excludes(decoder_opt);
   cmd->add_option("--ddim-steps", *steps, "DDIM steps (default: the decoder's config, paper §5.2: 50)")

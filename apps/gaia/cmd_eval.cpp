@@ -36,9 +36,12 @@ void register_eval(CLI::App& app) {
   auto flags = std::make_shared<SharedFlags>();
   auto e = std::make_shared<EvalFlags>();
   cmd->add_option("TOKENS", e->tokens, "token dataset (gaia tokenize): held-out episodes give the prompts")->required();
-  cmd->add_option("--world", e->world, "world model weights")->required();
-  cmd->add_option("--tokenizer", e->tokenizer, "tokenizer weights (decodes the rollouts)")->required();
-  cmd->add_option("--dataset", e->dataset, "the procedural dataset the tokens came from: counterfactual replay");
+  cmd->add_option("EPISODES", e->dataset,
+                  "the procedural episode dataset the tokens came from (gaia synth): action control's counterfactual "
+                  "replay");
+  add_weights_flag(cmd, Weights::World, &e->world)->required();
+  add_weights_flag(cmd, Weights::Tokenizer, &e->tokenizer, "decodes the rollouts")->required();
+  auto old_dataset = add_old_spelling(cmd, "--dataset", "the positional EPISODES");
   cmd->add_option("--dynamics-probe", e->dynamics_probe, "dynamics probe weights (default: the shipped one)");
   cmd->add_option("--scene-probe", e->scene_probe, "scene probe weights (default: the shipped one)");
   cmd->add_option("--only", e->only, "comma-separated parts: action, text, futures, long");
@@ -77,6 +80,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--world-eval", e->world_eval, "a `gaia world eval` output directory to include in the report");
   add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)");
   cmd->callback([=] {
+    old_spelling_into(*old_dataset, e->dataset);
     Config run = resolve_config(*flags);
     apply_threads(run);
     if (flags->out.empty()) fail("gaia eval: --out DIR is required");

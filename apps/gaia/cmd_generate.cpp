@@ -46,12 +46,15 @@ void register_generate(CLI::App& app) {
   auto* cmd = app.add_subcommand("generate", "roll out futures with the world model (video/action/text prompts)");
   auto flags = std::make_shared<SharedFlags>();
   auto g = std::make_shared<GenerateFlags>();
-  cmd->add_option("--world", g->world, "world model weights (world.safetensors)")->required();
-  cmd->add_option("--tokenizer", g->tokenizer, "tokenizer weights: decodes a preview video, tokenizes --video");
-  auto* tokens_opt = cmd->add_option("--tokens", g->tokens, "video prompt from this token dataset (with --episode)");
-  cmd->add_option("--episode", g->episode, "episode id or index in --tokens");
+  auto* tokens_opt = cmd->add_option("TOKENS", g->tokens, "video prompt from this token dataset (with --episode; none: no video prompt)");
+  add_weights_flag(cmd, Weights::World, &g->world)->required();
+  add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes a preview video, tokenizes --video");
+  auto old_tokens = add_old_spelling(cmd, "--tokens", "the positional TOKENS");
+  cmd->add_option("--episode", g->episode, "episode id or index in TOKENS");
   cmd->add_option("--start", g->start, "first prompt step in the episode");
-  cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)")->excludes(tokens_opt);
+  cmd->add_option("--video", g->video, "video prompt from a video file (needs --tokenizer)")
+      ->excludes(tokens_opt)
+      ->excludes(old_tokens->option);
   cmd->add_option("--prompt-frames", g->prompt_frames, "prompt frames (default: context - 1, at most 4)");
   cmd->add_option("--frames", g->frames, "frames to generate (sliding window beyond the context)")
       ->check(number_in({1, 1e6}));
@@ -82,6 +85,7 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--plateau", g->plateau, "frames at full guidance before the cosine decay");
   add_shared_flags(cmd, flags.get(), "output directory (rollout.safetensors, preview.mp4)");
   cmd->callback([=] {
+    old_spelling_into(*old_tokens, g->tokens);
     Config run = resolve_config(*flags);
     apply_threads(run);
     if (flags->out.empty()) fail("gaia generate: --out DIR is required");

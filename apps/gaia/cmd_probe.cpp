@@ -23,16 +23,17 @@ void register_probe(CLI::App& app) {
     cmd->add_option("KIND", *kind, "dynamics | scene")->required();
     cmd->add_option("DATASET", *dataset, "episode dataset with labels (gaia synth)")->required();
     cmd->add_option("--steps", o->steps, "training steps")->check(number_in({1, 1e9}));
-    cmd->add_option("--batch", o->batch, "examples per step");
+    cmd->add_option("--batch-size", o->batch, "examples per step");
+    cmd->add_option("--batch", o->batch, "old spelling of --batch-size")->group("");
     cmd->add_option("--frames", o->frames,
                     "dynamics: frames one example reads, one world-model step apart (default 4: gentle steering barely "
                     "shows in 2; `gaia eval` then needs at least 3 generated frames)");
     cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
-    auto* through = cmd->add_option("--tokenizer", o->tokenizer,
-                                    "read a share of the training frames through this tokenizer (encoded and decoded), "
-                                    "as `gaia eval` reads generated frames; validation then also scores decoded "
-                                    "held-out frames");
+    auto* through = add_weights_flag(cmd, Weights::Tokenizer, &o->tokenizer,
+                                     "a share of the training frames is read through it (encoded and decoded), as "
+                                     "`gaia eval` reads generated frames; validation then also scores decoded "
+                                     "held-out frames");
     cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)")
         ->needs(through);
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
@@ -44,7 +45,7 @@ void register_probe(CLI::App& app) {
       opt.kind = probe::parse_kind(*kind);
       opt.dataset = *dataset;
       opt.out = flags->out;
-      if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch must be >= 1");
+      if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch-size must be >= 1");
       if (opt.frames < 0) fail("gaia probe train: --frames must be >= 1, got {}", opt.frames);
       if (!(opt.decoded_share >= 0 && opt.decoded_share <= 1))
         fail("gaia probe train: --decoded-share must be in [0, 1], got {}", opt.decoded_share);
@@ -65,16 +66,26 @@ void register_probe(CLI::App& app) {
     auto* cmd = probe->add_subcommand("eval", "score a probe on the held-out episodes of a labelled dataset");
     auto flags = std::make_shared<SharedFlags>();
     auto weights = std::make_shared<std::string>(), dataset = std::make_shared<std::string>();
+    auto old_second = std::make_shared<std::string>();
     auto n = std::make_shared<int>(512);
-    cmd->add_option("WEIGHTS", *weights, "probe weights (probe-KIND.safetensors)")->required();
     cmd->add_option("DATASET", *dataset, "episode dataset with labels")->required();
+    // The old spelling `probe eval WEIGHTS DATASET`: a second positional, hidden.
+    auto* old_form = cmd->add_option("OLD_DATASET", *old_second, "old spelling: WEIGHTS DATASET")->group("");
+    add_weights_flag(cmd, Weights::Probe, weights.get());
     auto tok_path = std::make_shared<std::string>();
     cmd->add_option("--examples", *n, "held-out examples (evenly spaced)")->check(number_in({1, 1e9}));
-    cmd->add_option("--tokenizer", *tok_path,
-                    "also score the frames read through this tokenizer (encoded and decoded), as `gaia eval` reads "
-                    "generated frames (key \"decoded\")");
+    add_weights_flag(cmd, Weights::Tokenizer, tok_path.get(),
+                     "also score the frames read through it (encoded and decoded), as `gaia eval` reads generated "
+                     "frames (key \"decoded\")");
     add_shared_flags(cmd, flags.get(), "output directory (probe_eval.json); default: print only");
     cmd->callback([=] {
+      if (old_form->count() > 0) {
+        if (!weights->empty()) fail("gaia probe eval: give the weights once: DATASET --probe WEIGHTS");
+        std::fprintf(stderr, "gaia: note: `probe eval WEIGHTS DATASET` is an old spelling; use DATASET --probe WEIGHTS\n");
+        *weights = *dataset;
+        *dataset = *old_second;
+      }
+      if (weights->empty()) fail("gaia probe eval: --probe WEIGHTS is required");
       Config c = resolve_config(*flags);
       apply_threads(c);
       auto dev = parse_device(c.run.device);
@@ -82,10 +93,12 @@ void register_probe(CLI::App& app) {
       data::Dataset ds(*dataset);
       const probe::Span span = probe::span_of(net, c);
       auto set = data::held_out_frames(ds, c.run.seed, span.reach(), std::max(1, *n));
+      if (set.frames.empty())
+        fail("{}: no held-out episode is long enough for this probe ({} frames, {} native frames from the first to "
+             "the last)", *dataset, span.frames, span.reach() + 1);
       const auto y = probe::targets(net->kind, set.episodes, set.frames, span);
       auto j = probe::score(net->kind, probe::predict(net, set, span, dev), y);
       if (!tok_path->empty()) {
-        if (set.frames.empty()) fail("{}: no held-out frames to score", *dataset);
         const auto& e = set.frames[0];
         auto tok = probe::load_through(*tok_path, set.episodes.at(e.episode)->frame_bgr(e.frame), *dataset, dev);
         j["decoded"] = probe::score(net->kind, probe::predict(net, set, span, dev, {&tok, dev}), y);

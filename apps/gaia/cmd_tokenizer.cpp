@@ -115,7 +115,7 @@ void register_tokenizer(CLI::App& app) {
     auto max_frames = std::make_shared<int>(256);
     auto stride = std::make_shared<int>(5);
     cmd->add_option("SOURCE", *src, "dataset (its validation episodes) or a video file")->required();
-    cmd->add_option("--tokenizer", *weights, "tokenizer weights (safetensors)")->required();
+    add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     cmd->add_option("--max-frames", *max_frames, "frames to score")->check(number_in({1, 1e9}));
     cmd->add_option("--stride", *stride, "video: use every Nth frame (a dataset's frames are spread evenly over its held-out episodes)")
         ->check(number_in({1, 1e6}));
@@ -151,7 +151,7 @@ void register_tokenizer(CLI::App& app) {
     auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     auto max_frames = std::make_shared<int>(100);
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
-    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     cmd->add_option("--max-frames", *max_frames, "frames to reconstruct")->check(number_in({1, 1e9}));
     add_shared_flags(cmd, flags.get(), "output directory");
     cmd->callback([=] {
@@ -181,7 +181,7 @@ void register_tokenizer(CLI::App& app) {
     auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     auto n = std::make_shared<int>(6);
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
-    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     cmd->add_option("--frames", *n, "frames to show")->check(number_in({1, 1e6}));
     add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)");
     cmd->callback([=] {
@@ -199,7 +199,7 @@ void register_tokenizer(CLI::App& app) {
     auto flags = std::make_shared<SharedFlags>();
     auto src = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     cmd->add_option("DATASET", *src, "episode dataset")->required();
-    cmd->add_option("--tokenizer", *weights, "tokenizer weights")->required();
+    add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     auto mirror = std::make_shared<bool>(false);
     cmd->add_flag("--mirror", *mirror,
                   "also write each episode in mirror image as <id>-mirror (flipped frames, negated curvature, left/right "

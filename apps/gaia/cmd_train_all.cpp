@@ -41,9 +41,8 @@ void register_train_all(CLI::App& app) {
   auto swerve = std::make_shared<double>(0.035);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
-  // Steps of each stage: the totals of the shipped models (MODEL_CARD.md; their world model and decoder ran in
-  // two resumed phases, and their tokenizer's decoder-only steps in three runs, 3500 + 3000 + 2500, which one run of
-  // each approximates).
+  // Steps of each stage: the totals the shipped models were trained for (MODEL_CARD.md, "Recipe"), each stage as
+  // one run.
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
         probe_scene = 2500, probe_dynamics = 4000;
@@ -118,8 +117,7 @@ void register_train_all(CLI::App& app) {
          out / "tokenizer" / "tokenizer.safetensors"},
         {"tokenizer-ft", no_gan_run((out / "tokenizer" / "tokenizer.safetensors").string(), st->finetune, "tokenizer-ft", {}),
          tok_ft},
-        // Every drive also in mirror image (data/mirror.h): the world model then sees as many right turns as left
-        // ones, and the shipped model's steering reaches its targets with them (MODEL_CARD.md, "World model").
+        // Every drive also in mirror image (data/mirror.h): the world model sees as many right turns as left ones.
         {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
          first_phase},
@@ -133,8 +131,7 @@ void register_train_all(CLI::App& app) {
          with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
                (out / "decoder").string()}),
          decoder},
-        // Half of its frames read through the final tokenizer, as gaia eval reads generated frames (MODEL_CARD.md,
-        // "Probes").
+        // Half of its frames read through the final tokenizer, as gaia eval reads generated frames.
         {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--tokenizer",
                               tok, "--decoded-share", "0.5", "--out", (out / "probe-scene").string()}),
          out / "probe-scene" / "probe-scene.safetensors"},
@@ -160,8 +157,8 @@ void register_train_all(CLI::App& app) {
     // Counterfactual replays of the lane-keeping training drives under held random steering commands, added to the
     // tokens after the world model's first phase, which then fine-tunes on both at half its rate, more often
     // action-conditioned (0.6 / 0.25 / 0.15), its text-only and unconditional predictions held to the first phase's
-    // (--distill-from): steering improves and text prompting is kept (docs/evaluation.md, "Counterfactual replays
-    // as training data").
+    // (--distill-from): the replays show what a command does from the states a prompt shows (synth/counterfactual.h)
+    // without costing the text conditioning.
     if (st->world_cf > 0) {
       const std::string cf = (out / "synth-cf").string(), first = first_phase.string();
       const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
@@ -172,8 +169,7 @@ void register_train_all(CLI::App& app) {
            out / "synth-cf" / ".complete", true},
           {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
            out / "tokens" / ".complete-cf", true}};
-      // A second round from the first one's weights steers better still and keeps the long rollouts within their
-      // targets (docs/evaluation.md, "DL2"); every round is held to the first phase, not to the round before.
+      // Each round starts from the round before; every round is held to the first phase, not to the round before.
       for (int round = 1; round <= st->world_cf_rounds; ++round) {
         const std::string init = round == 1 ? first : (cf_dir(round - 1) / "world.safetensors").string();
         cf_stages.push_back({cf_dir(round).filename().string(),
@@ -206,7 +202,7 @@ void register_train_all(CLI::App& app) {
                               "--out", (out / "decoder-eval").string()}),
                         out / "decoder-eval" / "eval.json"});
       stages.push_back({"eval",
-                        with({"eval", tokens, "--world", world, "--tokenizer", tok, "--dataset", synth,
+                        with({"eval", tokens, synth, "--world", world, "--tokenizer", tok,
                               "--dynamics-probe", (out / "probe-dynamics" / "probe-dynamics.safetensors").string(),
                               "--scene-probe", (out / "probe-scene" / "probe-scene.safetensors").string(),
                               "--world-eval", (out / "world-eval").string(), "--metrics",

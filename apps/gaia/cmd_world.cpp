@@ -97,7 +97,7 @@ void register_world(CLI::App& app) {
     auto sweep = std::make_shared<std::vector<int>>();
     auto sweep_windows = std::make_shared<size_t>(64);
     cmd->add_option("TOKENS", *tokens, "token dataset (its validation episodes are scored)")->required();
-    cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
+    add_weights_flag(cmd, Weights::World, weights.get())->required();
     cmd->add_option("--max-windows", *max_windows, "held-out windows of T steps to score");
     cmd->add_option("--top-k-sweep", *sweep,
                     "Fig. 5 strategies: k values for top-k sampling of each window's last frame, scored like real "
@@ -228,7 +228,7 @@ void register_world(CLI::App& app) {
     auto max_windows = std::make_shared<size_t>(256);
     cmd->add_option("TOKENS", *tokens, "token dataset (its training episodes are used; all episodes if none is held out)")
         ->required();
-    cmd->add_option("--world", *weights, "world model weights (world.safetensors)")->required();
+    add_weights_flag(cmd, Weights::World, weights.get())->required();
     cmd->add_option("--max-windows", *max_windows, "training windows of T steps, evenly spaced");
     auto without = std::make_shared<std::vector<std::string>>();
     cmd->add_option("--without-meta", *without,

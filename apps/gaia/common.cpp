@@ -46,6 +46,33 @@ void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help
   cmd->add_option("--out", f->out, out_help);
 }
 
+std::string weights_flag_name(Weights which) {
+  static const char* names[] = {"--tokenizer", "--world", "--decoder", "--probe"};
+  return names[static_cast<int>(which)];
+}
+
+std::string weights_flag_help(Weights which, const std::string& use) {
+  static const char* what[] = {"tokenizer weights (tokenizer.safetensors)", "world model weights (world.safetensors)",
+                               "video decoder weights (decoder.safetensors)", "probe weights (probe-KIND.safetensors)"};
+  const std::string w = what[static_cast<int>(which)];
+  return use.empty() ? w : w + ": " + use;
+}
+
+std::shared_ptr<OldSpelling> add_old_spelling(CLI::App* cmd, const std::string& name, const std::string& use) {
+  auto o = std::make_shared<OldSpelling>();
+  o->name = name;
+  o->use = use;
+  o->option = cmd->add_option(name, o->value, "old spelling of " + use)->group("");  // group "" hides it
+  return o;
+}
+
+void old_spelling_into(const OldSpelling& o, std::string& target) {
+  if (o.option->count() == 0) return;
+  if (!target.empty()) fail("{} is the old spelling of {}: give one of them", o.name, o.use);
+  std::fprintf(stderr, "gaia: note: %s is an old spelling; use %s\n", o.name.c_str(), o.use.c_str());
+  target = o.value;
+}
+
 Config resolve_config(const SharedFlags& f) {
   Config c = f.config.empty() ? Config{} : Config::load(f.config);
   for (auto& kv : f.sets) c.set(kv);

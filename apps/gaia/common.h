@@ -1,5 +1,6 @@
 #pragma once
 // Shared command-line plumbing: every subcommand takes the same run flags and resolves one Config from them.
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,25 @@ struct SharedFlags {
 
 // Adds --config/--set/--device/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
 void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory");
+
+// The CLI's one rule: data positional, weights by component. Each component's weights flag is declared here, with
+// one name and one help text; `use` adds what this command does with them (e.g. "decodes the preview").
+enum class Weights { Tokenizer, World, Decoder, Probe };
+std::string weights_flag_name(Weights which);                           // "--tokenizer", ...
+std::string weights_flag_help(Weights which, const std::string& use);  // "tokenizer weights (tokenizer.safetensors): USE"
+template <typename Path>  // std::string or fs::path
+CLI::Option* add_weights_flag(CLI::App* cmd, Weights which, Path* path, const std::string& use = "") {
+  return cmd->add_option(weights_flag_name(which), *path, weights_flag_help(which, use));
+}
+
+// An old spelling of an option kept for a release: hidden from --help, writing the same variable. The callback
+// copies it over (old_spelling_into) and says once on stderr which name to use instead.
+struct OldSpelling {
+  std::string name, use, value;
+  CLI::Option* option = nullptr;
+};
+std::shared_ptr<OldSpelling> add_old_spelling(CLI::App* cmd, const std::string& name, const std::string& use);
+void old_spelling_into(const OldSpelling& o, std::string& target);
 
 // Config from --config (or defaults), then --set overrides, then --device/--threads/--seed; validated.
 Config resolve_config(const SharedFlags& f);

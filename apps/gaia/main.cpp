@@ -86,9 +86,20 @@ void install_last_resort_handlers() {
   for (int sig : {SIGSEGV, SIGFPE, SIGBUS, SIGILL}) std::signal(sig, on_fatal_signal);
 }
 
+// LibTorch's OpenMP threads spin at every barrier unless OMP_WAIT_POLICY says otherwise, and beside OpenBLAS's
+// threads or another process on the same cores the spinning threads take the cores from the ones with work: a run
+// slows down several times over. libgomp reads the variable once, as it loads, so the process starts itself again
+// with it set (once: the variable is then present). A value the user set wins.
+void exec_with_passive_openmp(char** argv) {
+  if (std::getenv("OMP_WAIT_POLICY")) return;
+  ::setenv("OMP_WAIT_POLICY", "PASSIVE", /*overwrite=*/1);
+  ::execv("/proc/self/exe", argv);  // returns only on failure: then run as we are
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  exec_with_passive_openmp(argv);
   install_last_resort_handlers();
   // FFmpeg's own log lines would break the "one clear error line" rule; our errors say what went wrong.
   ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);

@@ -214,7 +214,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       const auto& id = ds.ids()[pr.episodes[size_t(r / C)]];
       auto it = std::find(raw->ids().begin(), raw->ids().end(), id);
       if (it == raw->ids().end())
-        fail("{}: episode {} of the token dataset is not in this dataset (--dataset must be the tokens' source)",
+        fail("{}: episode {} of the token dataset is not in this dataset (EPISODES must be the tokens' source)",
              raw->root().string(), id);
       data::Episode src = raw->episode(size_t(it - raw->ids().begin()));
       const int64_t from = (pr.starts[size_t(r / C)] + P - 1) * stride;

@@ -162,10 +162,11 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     // Same architecture required (init_from names the file on a mismatch), except that temporal attention layers
     // the --init weights lack (decoder.temporal_levels grown, e.g. to full resolution as in Ho et al.) start fresh:
     // their output projection is zero, so the fine-tuned network starts as the given one. Fresh optimiser and schedule.
-    train::init_from(*model, *load_decoder(opt.init, dev), opt.init,
-                     [](const std::string& k) { return k.find(".temporal.") != std::string::npos; });
+    const auto dropped = train::init_from(*model, *load_decoder(opt.init, dev), opt.init,
+                                          [](const std::string& k) { return k.find(".temporal.") != std::string::npos; });
     train::ema_copy(*ema, *model);
     note("initialised from " + opt.init.string());
+    if (!dropped.empty()) note(dropped);
   }
   fs::create_directories(opt.out);
   train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);

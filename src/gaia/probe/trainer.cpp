@@ -106,6 +106,7 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
 
 torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev,
                       const Through& through) {
+  if (s.frames.empty()) fail("probe: no examples to predict");
   torch::NoGradGuard ng;
   const bool was_training = net->is_training();
   net->eval();

@@ -132,10 +132,11 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     Config init_cfg;
     auto init = load_tokenizer(opt.init, dev, &init_cfg, &cfg);
     // the DINO head and any refinement or token blocks the --init weights lack start fresh (the blocks as identities)
-    train::init_from(*model, *init, opt.init, [](const std::string& k) {
+    const auto dropped = train::init_from(*model, *init, opt.init, [](const std::string& k) {
       return k.rfind("dino_head.", 0) == 0 || k.rfind("decoder.refine.", 0) == 0 || k.rfind("decoder.token.", 0) == 0;
     });
     note("initialised from " + opt.init.string());
+    if (!dropped.empty()) note(dropped);
   }
   if (averaged && !result.resumed) train::ema_copy(*averaged, *model);
   fs::create_directories(opt.out);

@@ -19,8 +19,8 @@ DType from_torch(torch::Dtype t);
 void set_torch_threads(int n);
 
 // Keeps large freed blocks in the process instead of returning them to the OS: glibc serves allocations above
-// 32 MB with fresh mmap()s, so every training step paid page faults and page clearing for its attention scores
-// (~15% of a world-model step in `perf`). Called once by the app and the benches.
+// 32 MB with fresh mmap()s, so every training step would pay page faults and page clearing for its attention
+// scores. Called once by the app and the benches.
 void configure_allocator();
 
 // Copies a tensor out of a (mapped) safetensors view.

@@ -104,9 +104,13 @@ uint64_t step_seed(uint64_t seed, int step, uint64_t stream) {
   return z ^ (z >> 31);
 }
 
-void init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::path& from,
-               const std::function<bool(const std::string&)>& fresh) {
+std::string init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::path& from,
+                      const std::function<bool(const std::string&)>& fresh) {
   const auto have = src.named_parameters();
+  const auto want = dst.named_parameters();
+  std::vector<std::string> dropped;
+  for (const auto& q : have)
+    if (!want.find(q.key())) dropped.push_back(q.key());
   torch::NoGradGuard ng;
   for (auto& p : dst.named_parameters()) {
     const auto* q = have.find(p.key());
@@ -119,6 +123,10 @@ void init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::p
            shape_str(p.value().sizes().vec()));
     p.value().copy_(q->to(p.value().device(), p.value().scalar_type()));
   }
+  if (dropped.empty()) return "";
+  return fmt::format("{}: {} tensors this run's config has no place for are dropped (first: '{}'); give the config "
+                     "the --init weights were trained with to keep them",
+                     from.string(), dropped.size(), dropped.front());
 }
 
 }  // namespace gaia::train

@@ -100,10 +100,11 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   } else if (init) {
     // Fresh optimiser and schedule. Action MLPs the --init model lacks start at zero output (model.cpp), so a
     // linear-action model fine-tunes into one with world.action_mlp > 0 from where it was.
-    train::init_from(*model, *init, opt.init, [](const std::string& k) {
+    const auto dropped = train::init_from(*model, *init, opt.init, [](const std::string& k) {
       return k.rfind("speed_mlp.", 0) == 0 || k.rfind("curvature_mlp.", 0) == 0;
     });
     note("initialised from " + opt.init.string());
+    if (!dropped.empty()) note(dropped);
   }
   init = nullptr;
   // The teacher of distillation: same token grid and codebook, and the same words for the same text ids.
