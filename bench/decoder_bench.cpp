@@ -4,7 +4,7 @@
 #include <benchmark/benchmark.h>
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/tokenizer/autoencoder.h"

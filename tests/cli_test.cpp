@@ -2,7 +2,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/safetensors.h"
 #include "test_util.h"
 

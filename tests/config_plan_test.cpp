@@ -1,9 +1,10 @@
 // Config registry (YAML, --set, unknown keys) and `gaia plan` against the paper's figures.
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 #include "gaia/plan/plan.h"
 #include "test_util.h"
 
+#include <algorithm>
 #include <cmath>
 
 using namespace gaia;
@@ -156,4 +157,28 @@ TEST(PlanCli, PrintsPaperFigures) {
   EXPECT_NE(r.output.find("15860"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("6.52B"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("472.6"), std::string::npos) << r.output;
+}
+
+// Each model's keys carry a role: the sampling keys (what a run or `gaia convert --set` may change in a weights
+// file's stored config) come from the registry, not from a hand-kept list, and every key of a model is either
+// its architecture, its training or its sampling.
+TEST(Config, EveryKeyHasARoleAndTheSamplingKeysComeFromIt) {
+  EXPECT_EQ(Config::keys("world", ConfigRole::Sampling),
+            (std::vector<std::string>{"world.top_k", "world.temperature", "world.guide_actions_within_top_k",
+                                      "world.guidance_scale"}));
+  EXPECT_EQ(Config::keys("decoder", ConfigRole::Sampling),
+            (std::vector<std::string>{"decoder.ddim_steps", "decoder.mix_probability", "decoder.mix_weight",
+                                      "decoder.noise_correlation", "decoder.noise_scale", "decoder.start_time"}));
+  const auto arch = Config::keys("world", ConfigRole::Architecture);
+  for (const char* k : {"world.d_model", "world.n_heads", "world.copy_bias"})
+    EXPECT_NE(std::find(arch.begin(), arch.end(), k), arch.end()) << k;
+  Config c;
+  for (const auto& f : c.fields()) {
+    const auto section = f.key.substr(0, f.key.find('.'));
+    if (section == "tokenizer" || section == "world" || section == "decoder")
+      EXPECT_TRUE(f.role == ConfigRole::Architecture || f.role == ConfigRole::Training || f.role == ConfigRole::Sampling)
+          << f.key;
+    if (section == "data") EXPECT_EQ(f.role, ConfigRole::Data) << f.key;
+    if (section == "run" || section == "name") EXPECT_EQ(f.role, ConfigRole::Run) << f.key;
+  }
 }

@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/decoder/evaluate.h"
@@ -39,7 +39,7 @@ struct DecoderPipeline {
     static DecoderPipeline p;
     return p;
   }
-  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
+  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
   std::string tokenizer() const { return " --tokenizer " + q(tok / "tokenizer.safetensors"); }
 };
 

@@ -7,7 +7,7 @@
 #include <set>
 #include <sstream>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/evaluate.h"

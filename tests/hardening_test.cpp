@@ -11,7 +11,7 @@
 #include <random>
 #include <regex>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/torch/tensor_io.h"
@@ -81,7 +81,7 @@ TEST(HardeningCli, ZeroHeadsAreRefusedFromEveryWayIn) {
   // The ranges are listed for users: one line per key, with the value in this config.
   auto keys = test::run_gaia("plan" + tiny() + " --keys");
   ASSERT_EQ(keys.status, 0) << keys.output;
-  EXPECT_TRUE(std::regex_search(keys.output, std::regex("\nworld\\.n_heads +int +4 +\\[1, 1024\\]\n"))) << keys.output;
+  EXPECT_TRUE(std::regex_search(keys.output, std::regex("\nworld\\.n_heads +int +architecture +4 +\\[1, 1024\\]\n"))) << keys.output;
   expect_one_error_line(test::run_gaia("plan" + tiny() + " --set world.d_model=-48"), "world.d_model");
   expect_one_error_line(test::run_gaia("plan" + tiny() + " --set tokenizer.batch_size=-1"), "tokenizer.batch_size");
   const fs::path tokens = bare_tokens(dir.path);

@@ -117,7 +117,7 @@ TEST(ShippedModelsSlow, VideoDecoderDecodesFreshDrivesToTwentyFiveHertz) {
   test::TempDir d;
   auto ds = fresh_synth(d, "", {{"clear", "day"}, {"overcast", "dusk"}});
   auto r = test::run_gaia("decoder eval " + q(ds) + " --tokenizer " + q(model("tokenizer.safetensors")) + " --decoder " +
-                          q(model("decoder.safetensors")) + " --clips 2 --token-frames 4 --steps 5 --threads 2 --out " +
+                          q(model("decoder.safetensors")) + " --clips 2 --token-frames 4 --steps 5 --threads 1 --out " +
                           q(d / "eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   auto j = nlohmann::json::parse(read_file(d / "eval" / "eval.json"));
@@ -199,7 +199,7 @@ TEST(ShippedModelsSlow, DemoRunsWithTheShippedModels) {
   if (!fs::exists(model("world.safetensors"))) GTEST_SKIP() << "models/world.safetensors not shipped";
   test::TempDir d;
   const std::string small = " --models " + q(test::source_dir() / "models") +
-                            " --prompt-frames 2 --frames 3 --ddim-steps 2 --fps 6.25 --threads 2";
+                            " --prompt-frames 2 --frames 3 --ddim-steps 2 --fps 6.25 --threads 1";
   auto r = test::run_gaia("demo" + small + " --action-guidance 1.5 --out " + q(d / "demo"));
   ASSERT_EQ(r.status, 0) << r.output;
   const std::string html = read_file(d / "demo" / "report.html");
@@ -248,7 +248,7 @@ TEST(ShippedModelsSlow, DemoTakesARealClipAsTheVideoPrompt) {
   if (!fs::exists(clip)) GTEST_SKIP() << "real clip " << clip << " absent (the real clips live beside the repository)";
   test::TempDir d;
   auto r = test::run_gaia("demo --models " + q(test::source_dir() / "models") +
-                          " --prompt-frames 2 --frames 3 --ddim-steps 2 --fps 6.25 --threads 2 --video " + q(clip) +
+                          " --prompt-frames 2 --frames 3 --ddim-steps 2 --fps 6.25 --threads 1 --video " + q(clip) +
                           " --out " + q(d / "real"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(fs::exists(d / "real" / "videos" / "real.gif"));

@@ -96,7 +96,7 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
   test::TempDir d;
   auto r = test::run_gaia("synth --episodes 6 --seconds 3 --size 32x64 --seed 9 --out " + q(d / "ds"));
   ASSERT_EQ(r.status, 0) << r.output;
-  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2";
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
   for (std::string kind : {"scene", "dynamics"}) {
     const std::string base = "probe train " + kind + " " + q(d / "ds") + tiny + " --steps 40 --batch 16 --val-every 20";  // --batch: the old spelling of --batch-size
     r = test::run_gaia(base + " --out " + q(d / (kind + "-a")));
@@ -167,7 +167,7 @@ TEST(ProbeCli, LearnsAndResumesExactly) {
 // too; bad shares and a tokenizer of another frame size fail with one line naming them.
 TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   test::TempDir d;
-  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2";
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
   auto r = test::run_gaia("synth --episodes 6 --seconds 2 --size 32x64 --seed 5 --out " + q(d / "ds"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = test::run_gaia("tokenizer train " + q(d / "ds") + tiny + " --steps 6 --out " + q(d / "tok"));

@@ -1,7 +1,7 @@
 // Image tokenizer: quantiser behaviour, shapes per config, parameter counts = gaia plan, overfit, errors.
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 #include "gaia/plan/plan.h"
 #include "gaia/tokenizer/autoencoder.h"

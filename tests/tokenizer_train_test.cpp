@@ -6,7 +6,7 @@
 #include <opencv2/core.hpp>
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"

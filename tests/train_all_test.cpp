@@ -26,7 +26,7 @@ int count(const std::string& s, const std::string& what) {
 TEST(TrainAllSlow, RunsEveryStageShipsAndResumes) {
   test::TempDir d;
   const std::string cmd = "train-all --config " + q(test::source_dir() / "configs" / "tiny.yaml") +
-                          " --threads 2 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 4 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"
+                          " --threads 1 --episodes 3 --wander-episodes 2 --swerve-episodes 1 --seconds 4 --tokenizer-steps 6 --finetune-steps 3 --refine-steps 2"
                           " --world-steps 4 --world-cf-steps 2 --decoder-steps 2 --probe-steps 3 --dynamics-probe-steps 3 --skip-eval" +
                           " --ship " + q(d / "models") + " --out " + q(d / "runs");
   auto r = test::run_gaia(cmd);

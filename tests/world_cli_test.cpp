@@ -49,7 +49,7 @@ struct Pipeline {
     static Pipeline p;
     return p;
   }
-  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 2"; }
+  static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
 };
 
 }  // namespace
@@ -165,7 +165,7 @@ TEST(WorldCli, BadInputsAreClearErrors) {
   EXPECT_NE(r.output.find("world.n_layers comes from the weights file"), std::string::npos) << r.output;
   r = test::run_gaia("generate" + w + " --frames 2 --set world.dropout=0.5 --out " + q(p.dir / "x"));
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("here only world.top_k, world.temperature, world.guide_actions_within_top_k can be set"),
+  EXPECT_NE(r.output.find("here only world.top_k, world.temperature, world.guide_actions_within_top_k, world.guidance_scale can be set"),
             std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "x" / "rollout.safetensors"));
   // The temperature stored with the model is generate's default: a file converted to 0.5 samples what --temperature

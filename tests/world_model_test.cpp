@@ -4,7 +4,7 @@
 
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/plan/plan.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/world/calibrate.h"

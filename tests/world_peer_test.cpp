@@ -3,7 +3,7 @@
 // same image-token loss (1e-5).
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/batch.h"

@@ -34,7 +34,7 @@ import torch.nn.functional as F
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import safetensors_py  # noqa: E402  (tools/safetensors_py.py)
 
-# TokenizerConfig defaults from src/gaia/core/config.h (the CPU-sized default config); data size 72x128.
+# TokenizerConfig defaults from src/gaia/tokenizer/config.h (the CPU-sized default config); data size 72x128.
 DEFAULT_TOKENIZER = {"downsample": 8, "codebook_size": 1024, "code_dim": 16, "channels": 32,
                      "channel_mult": [1, 2, 2, 4], "res_blocks": 1, "z_channels": 128}
 DEFAULT_DATA = {"height": 72, "width": 128}

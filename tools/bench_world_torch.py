@@ -61,7 +61,7 @@ import torch.nn.functional as F
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import safetensors_py  # noqa: E402  (tools/safetensors_py.py)
 
-# WorldConfig defaults from src/gaia/core/config.h; n and K from the default data/tokenizer config
+# WorldConfig defaults from src/gaia/world/config.h; n and K from the default data/tokenizer config
 # (72x128 frames, D = 8 -> 9 x 16 = 144 tokens; codebook_size 1024).
 DEFAULT_WORLD = {"d_model": 192, "n_layers": 4, "n_heads": 6, "context_steps": 8, "text_tokens": 16,
                  "text_dim": 128, "text_vocab": 2048, "action_tokens": 2}

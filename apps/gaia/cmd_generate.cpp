@@ -72,8 +72,9 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--top-p", g->top_p, "p for top-p")->check(number_in({0, 1, true, false}));
   cmd->add_option("--temperature", g->temperature, "softmax temperature (default: config world.temperature)")
       ->check(key_range("world.temperature"));
-  cmd->add_option("--guidance", g->guidance,
-                  "classifier-free guidance scale s (0 = off); guided on actions alone, top-k tokens stay within the "
+  auto* guidance_opt = cmd->add_option("--guidance", g->guidance,
+                  "classifier-free guidance scale s (0 = off; default: the weights' world.guidance_scale); guided on "
+                  "actions alone, top-k tokens stay within the "
                   "unguided top k (--set world.guide_actions_within_top_k=false lifts that)")
       ->check(key_range("world.guidance_scale"));
   cmd->add_option("--action-negative", g->action_negative,
@@ -184,7 +185,7 @@ void register_generate(CLI::App& app) {
     o.sampling.top_p = g->top_p;
     o.sampling.temperature = g->temperature > 0 ? g->temperature : info.config.world.temperature;
     o.sampling.guide_actions_within_top_k = info.config.world.guide_actions_within_top_k;
-    o.guidance.scale = g->guidance;
+    o.guidance.scale = guidance_opt->count() ? g->guidance : info.config.world.guidance_scale;  // the file's default
     o.guidance.tokens = world::parse_token_schedule(g->token_schedule);
     o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
     o.guidance.plateau = g->plateau;
@@ -201,7 +202,7 @@ void register_generate(CLI::App& app) {
     fs::create_directories(flags->out);
     auto grid = r.tokens.view({g->futures, steps, info.grid_h, info.grid_w}).to(torch::kInt);
     nlohmann::json meta = {{"prompt_frames", P}, {"frames", F}, {"futures", g->futures}, {"window_stride", g->window_stride},
-                           {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", g->guidance},
+                           {"sampling", world::to_string(o.sampling.strategy)}, {"guidance", o.guidance.scale},
                            {"guide_actions_within_top_k", o.sampling.guide_actions_within_top_k},
                            {"text", g->text}, {"negative", g->negative}, {"steer", g->steer},
                            {"action_negative", g->action_negative},

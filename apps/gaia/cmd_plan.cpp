@@ -16,15 +16,15 @@ void register_plan(CLI::App& app) {
   add_shared_flags(cmd, flags.get(), "unused");
   auto json = std::make_shared<bool>(false), keys = std::make_shared<bool>(false);
   cmd->add_flag("--json", *json, "print the plan as JSON");
-  cmd->add_flag("--keys", *keys, "list every config key with its type, value in this config and allowed range");
+  cmd->add_flag("--keys", *keys, "list every config key with its type, role (architecture, training, sampling, ...), value in this config and allowed range");
   cmd->callback([=] {
     SharedFlags f = *flags;
     if (!positional->empty()) f.config = *positional;
     Config c = resolve_config(f);
     if (*keys) {
-      std::printf("%-34s %-12s %-24s %s\n", "key", "type", "value", "allowed");
+      std::printf("%-34s %-12s %-12s %-24s %s\n", "key", "type", "role", "value", "allowed");
       for (auto& k : c.fields())
-        std::printf("%-34s %-12s %-24s %s\n", k.key.c_str(), k.type.c_str(), k.get().c_str(),
+        std::printf("%-34s %-12s %-12s %-24s %s\n", k.key.c_str(), k.type.c_str(), role_name(k.role), k.get().c_str(),
                     k.range.bounded() ? k.range.str().c_str() : "");
       return;
     }

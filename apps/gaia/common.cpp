@@ -85,10 +85,8 @@ Config resolve_config(const SharedFlags& f) {
   return c;
 }
 
-const std::vector<std::string> kWorldSamplingKeys{"world.top_k", "world.temperature", "world.guide_actions_within_top_k"};
-const std::vector<std::string> kDecoderSamplingKeys{"decoder.ddim_steps",        "decoder.mix_probability",
-                                                    "decoder.mix_weight",        "decoder.noise_correlation",
-                                                    "decoder.noise_scale",       "decoder.start_time"};
+const std::vector<std::string> kWorldSamplingKeys = Config::keys("world", ConfigRole::Sampling);
+const std::vector<std::string> kDecoderSamplingKeys = Config::keys("decoder", ConfigRole::Sampling);
 
 void apply_sampling_sets(const SharedFlags& f, const std::string& section, const std::vector<std::string>& sampling_keys,
                          const std::string& weights, Config& model_cfg) {

@@ -6,7 +6,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 
 namespace gaia::app {
 
@@ -50,8 +50,9 @@ Config resolve_config(const SharedFlags& f);
 void apply_sampling_sets(const SharedFlags& f, const std::string& section, const std::vector<std::string>& sampling_keys,
                          const std::string& weights, Config& model_cfg);
 
-// The keys that say how a model is sampled rather than what it is: a weights file stores them with its config, a run
-// may override them (apply_sampling_sets), and `gaia convert --set` changes the file's own.
+// The keys that say how a model is sampled rather than what it is (ConfigRole::Sampling in the registry): a weights
+// file stores them with its config, a run may override them (apply_sampling_sets), and `gaia convert --set`
+// changes the file's own.
 extern const std::vector<std::string> kWorldSamplingKeys;    // world.top_k, world.temperature, ...
 extern const std::vector<std::string> kDecoderSamplingKeys;  // decoder.ddim_steps, decoder.start_time, ...
 

@@ -4,7 +4,7 @@
 #include <string>
 
 #include "fuzz_util.h"
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -7,7 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/tokenizer/autoencoder.h"
 

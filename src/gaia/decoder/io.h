@@ -1,7 +1,7 @@
 #pragma once
 // Shipping a video decoder: weights (the EMA copy, §4.3) in safetensors with the config YAML and the tokenizer's
 // codebook size K and downsampling D in the metadata, so a weights file is all `gaia decode` needs besides tokens.
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/decoder/unet.h"
 
 namespace gaia::decoder {

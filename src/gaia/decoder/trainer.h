@@ -9,7 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/data/episode.h"
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/tasks.h"

@@ -9,7 +9,7 @@
 // the tokenizer decoder's image of the tokens (`cond_image`), the diffusion time and the frame rate.
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/tokenizer/blocks.h"
 
 namespace gaia::decoder {

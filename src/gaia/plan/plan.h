@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 
 namespace gaia::plan {
 

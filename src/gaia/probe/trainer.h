@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/data/episode.h"
 #include "gaia/data/frame_set.h"
 #include "gaia/probe/probe.h"

@@ -3,7 +3,7 @@
 // to train the tokenizer (and for quick previews). x [B, 3, H, W] in [-1, 1] -> tokens [B, H/D, W/D] in [0, K).
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/tokenizer/blocks.h"
 #include "gaia/tokenizer/quantizer.h"
 

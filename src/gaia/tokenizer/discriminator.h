@@ -3,7 +3,7 @@
 // with the hinge loss. x [B, 3, H, W] -> logits [B, 1, h', w'], one per overlapping patch.
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 
 namespace gaia::tokenizer {
 

@@ -11,7 +11,7 @@
 #include <opencv2/core.hpp>
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/tokenizer/autoencoder.h"
 
 namespace gaia::tokenizer {

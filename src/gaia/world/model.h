@@ -11,7 +11,7 @@
 // The loss is the cross-entropy of the image tokens only (paper eq. 1).
 #include <torch/torch.h>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/world/batch.h"
 #include "gaia/world/layout.h"
 #include "gaia/world/transformer.h"

@@ -21,7 +21,7 @@
 #include <string>
 #include <vector>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/fs.h"
 #include "gaia/data/balance.h"
 #include "gaia/data/episode.h"

@@ -8,7 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "gaia/core/config.h"
+#include "gaia/config.h"
 #include "gaia/core/fs.h"
 
 namespace gaia::world {
