@@ -6,11 +6,10 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
-#include "gaia/eval/compress.h"
-#include "gaia/eval/svg_plot.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/calibrate.h"
 #include "gaia/world/evaluate.h"
+#include "gaia/world/world_eval.h"
 #include "gaia/world/io.h"
 #include "gaia/world/trainer.h"
 
@@ -112,110 +111,20 @@ void register_world(CLI::App& app) {
       auto model = load_world_for(*flags, run, *weights, &info);
       world::TokenDataset ds(*tokens, info.K);
       check_tokens(ds, info, *tokens);
-      auto split = ds.split(0.1, info.config.run.seed);
-      auto ids = split.held_out();
-      if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
-      auto eps = ds.indices(ids);
-      auto windows = world::validation_windows(ds, eps, info.config.world.context_steps, *max_windows);
-      if (windows.empty()) fail("{}: no held-out window of {} steps to score", *tokens, info.config.world.context_steps);
-      const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
-      nlohmann::json j = {{"tokens", *tokens}, {"world", *weights}, {"windows", windows.size()}};
-      std::vector<int> ks = sweep->empty() ? std::vector<int>{1, info.config.world.top_k, 0} : *sweep;
-      for (int k : ks)
-        if (k < 0 || k > info.K) fail("--top-k-sweep: k must be in [0, {}] (0 = the whole distribution), got {}", info.K, k);
-      if (*sweep_windows < 1) fail("--sweep-windows must be >= 1");
-      ProgressBar bar(int64_t(7 + ks.size()), "world eval");
-      int done = 0;
-      auto run_score = [&](world::Conditioning mode, bool shuffle) {
-        world::ScoreOptions so;
-        so.mode = mode;
-        so.shuffle = shuffle;
-        so.batch = info.config.world.batch_size;
-        auto s = world::score(model, ds, windows, vocab, so);
-        bar.update(++done);
-        return s;
-      };
-      auto act = run_score(world::Conditioning::kAction, false);
-      auto act_shuf = run_score(world::Conditioning::kAction, true);
-      auto txt = run_score(world::Conditioning::kText, false);
-      auto txt_shuf = run_score(world::Conditioning::kText, true);
-      auto unc = run_score(world::Conditioning::kUnconditional, false);
-      // The same held-out token stream (the scored windows, in order) through general-purpose compressors.
-      std::vector<int16_t> stream;
-      for (auto& w : windows) {
-        auto ep = ds.episode(w.episode);
-        const int64_t n = ds.tokens_per_step();
-        for (int64_t t = w.start; t < w.start + w.steps; ++t)
-          for (int64_t i = 0; i < n; ++i) stream.push_back(static_cast<int16_t>(ep->tokens[size_t(t * n + i)]));
-      }
-      auto xz = eval::xz_size(stream), zs = eval::zstd_size(stream);
-      const double floor = std::min(xz.bits_per_token, zs.bits_per_token);
-      j["cross_entropy_nats"] = {{"action", act.nats}, {"text", txt.nats}, {"uncond", unc.nats},
-                                 {"action_shuffled", act_shuf.nats}, {"text_shuffled", txt_shuf.nats}};
-      j["bits_per_token"] = {{"world_model", act.bits()}, {"xz", xz.bits_per_token}, {"zstd", zs.bits_per_token},
-                             {"ratio_best_compressor_over_model", floor / act.bits()}};
-      j["conditioning_used"] = {{"action_shuffled_minus_true_nats", act_shuf.nats - act.nats},
-                                {"text_shuffled_minus_true_nats", txt_shuf.nats - txt.nats}};
-      auto steer = world::steering_sensitivity(model, ds, windows, info.config.world.batch_size);
-      bar.update(++done);
-      auto steer_row = [](const world::SteeringSensitivity::Row& r) {
-        return nlohmann::json{{"frames", r.frames}, {"nats", r.nats}, {"curvature_zeroed_rise_nats", r.zeroed_rise},
-                              {"curvature_mirrored_rise_nats", r.mirrored_rise}};
-      };
-      j["steering_sensitivity"] = {{"threshold_per_m", 0.004},
-                                   {"left", steer_row(steer.left)},
-                                   {"right", steer_row(steer.right)},
-                                   {"straight", steer_row(steer.straight)}};
-      auto exp_all = [](const std::vector<double>& v) {
-        std::vector<double> e;
-        for (double x : v) e.push_back(std::exp(x));
-        return e;
-      };
-      const std::vector<double> ppl = exp_all(act.by_position);
-      j["perplexity_by_position"] = ppl;
-      // Fig. 5: the last frame of held-out windows, real and as each strategy draws it, scored by the model.
-      const auto few = std::vector<world::Window>(windows.begin(), windows.begin() + long(std::min(windows.size(), *sweep_windows)));
-      const int64_t batch = info.config.world.batch_size;
-      auto real_last = world::score_last_frame(model, ds, few, std::nullopt, batch, info.config.run.seed);
-      bar.update(++done);
-      std::vector<eval::Series> lines{{"real tokens", exp_all(real_last.by_position), ""}};
-      nlohmann::json strategies = nlohmann::json::array();
-      for (int k : ks) {
-        world::SamplingOptions so;
-        so.temperature = info.config.world.temperature;
-        so.strategy = k == 1 ? world::Strategy::Argmax : k == 0 ? world::Strategy::Sample : world::Strategy::TopK;
-        so.top_k = k;
-        const std::string name = k == 1 ? "argmax" : k == 0 ? "sample (whole distribution)" : fmt::format("top-k, k = {}", k);
-        auto g = world::score_last_frame(model, ds, few, so, batch, info.config.run.seed);
-        bar.update(++done);
-        // How far the draws' per-position perplexity is from the real tokens': mean |log ppl_gen - log ppl_real|.
-        double gap = 0;
-        for (size_t i = 0; i < g.by_position.size(); ++i) gap += std::abs(g.by_position[i] - real_last.by_position[i]);
-        gap /= double(g.by_position.size());
-        strategies.push_back({{"strategy", name}, {"top_k", k}, {"perplexity_by_position", exp_all(g.by_position)},
-                              {"mean_nats", g.nats}, {"log_perplexity_gap", gap}, {"copy_rate", g.copy_rate}});
-        lines.push_back({name, exp_all(g.by_position), ""});
-      }
-      bar.finish();
-      j["last_frame"] = {{"windows", few.size()},
-                         {"temperature", info.config.world.temperature},
-                         {"real", {{"perplexity_by_position", exp_all(real_last.by_position)},
-                                   {"mean_nats", real_last.nats},
-                                   {"copy_rate", real_last.copy_rate}}},
-                         {"strategies", strategies}};
+      world::WorldEvalOptions eo;
+      eo.max_windows = *max_windows;
+      eo.top_k_sweep = *sweep;
+      eo.sweep_windows = *sweep_windows;
+      eo.name = *tokens;
+      eo.weights = *weights;
+      std::unique_ptr<ProgressBar> bar;
+      auto j = world::evaluate_world(model, info, ds, eo, [&](int done, int total) {
+        if (!bar) bar = std::make_unique<ProgressBar>(total, "world eval");
+        bar->update(done);
+      });
+      if (bar) bar->finish();
       std::printf("%s\n", j.dump(2).c_str());
-      if (!flags->out.empty()) {
-        fs::create_directories(flags->out);
-        write_file_atomic(fs::path(flags->out) / "eval.json", j.dump(2) + "\n");
-        std::vector<double> xs;
-        for (size_t i = 0; i < ppl.size(); ++i) xs.push_back(double(i));
-        auto svg = eval::svg_lines("Perplexity by token position within a frame (Fig. 5)", xs,
-                                   {{"real tokens (action-conditioned)", ppl, ""}}, "token position", "perplexity");
-        write_file_atomic(fs::path(flags->out) / "perplexity_by_position.svg", svg);
-        write_file_atomic(fs::path(flags->out) / "perplexity_by_strategy.svg",
-                          eval::svg_lines("Perplexity of the generated frame's tokens by position (Fig. 5)", xs, lines,
-                                          "token position", "perplexity"));
-      }
+      if (!flags->out.empty()) world::write_world_eval(j, flags->out);
     });
   }
 
