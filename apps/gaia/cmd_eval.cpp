@@ -2,16 +2,11 @@
 // text control against the guidance scale, diversity of futures, and a minute-long rollout; results as eval.json,
 // plots, videos and the report manifest (report.json) that `gaia report` turns into one HTML page.
 #include <cstdio>
-#include <set>
 
 #include "common.h"
-#include "gaia/control/action.h"
-#include "gaia/control/rollouts.h"
-#include "gaia/control/text.h"
+#include "gaia/control/eval.h"
 #include "gaia/core/error.h"
-#include "gaia/core/json_file.h"
 #include "gaia/core/progress.h"
-#include "gaia/report/report.h"
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::app {
@@ -84,16 +79,7 @@ void register_eval(CLI::App& app) {
     Config run = resolve_config(*flags);
     apply_threads(run);
     if (flags->out.empty()) fail("gaia eval: --out DIR is required");
-    std::set<std::string> parts;
-    for (size_t a = 0; a <= e->only.size();) {
-      size_t b = e->only.find(',', a);
-      if (b == std::string::npos) b = e->only.size();
-      auto p = e->only.substr(a, b - a);
-      if (p != "action" && p != "text" && p != "futures" && p != "long")
-        fail("--only: unknown part '{}' (action, text, futures, long)", p);
-      parts.insert(p);
-      a = b + 1;
-    }
+    const auto parts = control::parse_parts(e->only);
     if (parts.count("long") && e->long_rollouts < 1)  // before any model is loaded or part is run
       fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
@@ -104,117 +90,52 @@ void register_eval(CLI::App& app) {
       fail("{}: {} tokens per frame, the world model takes {}", e->tokens, ds.tokens_per_step(), m.info.n());
     std::unique_ptr<data::Dataset> raw;
     if (!e->dataset.empty()) raw = std::make_unique<data::Dataset>(e->dataset);
-    else if (parts.count("action")) std::printf("note: no --dataset: action control without the counterfactual replay\n");
+    else if (parts.count("action")) std::printf("note: no EPISODES dataset: action control without the counterfactual replay\n");
 
-    control::Output out;
-    out.dir = flags->out;
-    fs::create_directories(out.dir);
+    control::EvalOptions o;
+    o.parts = parts;
     world::SamplingOptions sampling;
     sampling.top_k = e->top_k > 0 ? e->top_k : m.info.config.world.top_k;  // paper §5.1: top-k sampling
     sampling.temperature = m.info.config.world.temperature;
     sampling.guide_actions_within_top_k = m.info.config.world.guide_actions_within_top_k;
-    nlohmann::json j = {{"world", e->world},        {"tokenizer", e->tokenizer},
-                        {"tokens", e->tokens},      {"top_k", sampling.top_k},
-                        {"temperature", sampling.temperature},
-                        {"guide_actions_within_top_k", sampling.guide_actions_within_top_k}};
+    o.header = {{"world", e->world},        {"tokenizer", e->tokenizer},
+                {"tokens", e->tokens},      {"top_k", sampling.top_k},
+                {"temperature", sampling.temperature},
+                {"guide_actions_within_top_k", sampling.guide_actions_within_top_k}};
+    o.action.prompts = e->prompts;
+    o.action.prompt_frames = e->prompt_frames;
+    o.action.frames = e->frames;
+    o.action.sampling = sampling;
+    o.action.guidance_scale = e->action_guidance;
+    o.action.mirror_negative = e->action_negative == "mirror";
+    o.action.commands = e->commands;
+    o.action.seed = uint64_t(run.run.seed);
+    o.text.futures = e->futures;
+    o.text.frames = e->text_frames;
+    o.text.scales = e->scales;
+    o.text.sampling = sampling;
+    o.text.seed = uint64_t(run.run.seed);
+    o.rollouts.prompts = e->prompts;
+    o.rollouts.prompt_frames = e->prompt_frames;
+    o.rollouts.frames = e->frames;
+    o.rollouts.futures = e->futures;
+    o.rollouts.long_seconds = e->long_seconds;
+    o.rollouts.window_seconds = e->window_seconds;
+    o.rollouts.long_rollouts = e->long_rollouts;
+    o.rollouts.sampling = sampling;
+    o.rollouts.seed = uint64_t(run.run.seed);
+    o.world_eval = e->world_eval;
+    o.metrics = e->metrics;
+    o.plots = e->plots;
+    o.command_line = g_command_line;
     ProgressBar bar(int64_t(parts.size()), "eval");
-    int done = 0;
-    if (parts.count("action")) {
-      control::ActionEvalOptions o;
-      o.prompts = e->prompts;
-      o.prompt_frames = e->prompt_frames;
-      o.frames = e->frames;
-      o.sampling = sampling;
-      o.guidance_scale = e->action_guidance;
-      o.mirror_negative = e->action_negative == "mirror";
-      o.commands = e->commands;
-      o.seed = uint64_t(run.run.seed);
-      j["action_control"] = control::action_control(m, ds, raw.get(), o, out);
-      bar.update(++done, "action control");
-    }
-    if (parts.count("text")) {
-      control::TextEvalOptions o;
-      o.futures = e->futures;
-      o.frames = e->text_frames;
-      o.scales = e->scales;
-      o.sampling = sampling;
-      o.seed = uint64_t(run.run.seed);
-      j["text_control"] = control::text_control(m, o, out, &ds);
-      bar.update(++done, "text control");
-    }
-    control::RolloutEvalOptions ro;
-    ro.prompts = e->prompts;
-    ro.prompt_frames = e->prompt_frames;
-    ro.frames = e->frames;
-    ro.futures = e->futures;
-    ro.long_seconds = e->long_seconds;
-    ro.window_seconds = e->window_seconds;
-    ro.long_rollouts = e->long_rollouts;
-    ro.sampling = sampling;
-    ro.seed = uint64_t(run.run.seed);
-    if (parts.count("futures")) {
-      j["futures"] = control::futures_diversity(m, ds, ro, out);
-      bar.update(++done, "futures");
-    }
-    if (parts.count("long")) {
-      bar.finish();
-      j["long_rollout"] = control::long_rollout(m, ds, ro, out);
-    }
+    auto j = control::run_eval(m, ds, raw.get(), o, flags->out, [&](int done, int total, const std::string& what) {
+      bar.update(done, what);
+      if (done == total) bar.finish();
+    });
     bar.finish();
-    if (!e->world_eval.empty()) {
-      // The likelihood side from `gaia world eval`: bits/token against the compressors and Fig. 5.
-      fs::path we = e->world_eval;
-      auto wj = read_json(we / "eval.json");
-      j["world_model"] = wj;
-      nlohmann::json sec = {{"title", "World model likelihood"},
-                            {"text", "Held-out cross-entropy of the image tokens, against xz -9 and zstd -19 on the "
-                                     "same token stream, and with the conditioning shuffled across examples."},
-                            {"metrics", wj}};
-      sec["plots"] = nlohmann::json::array();
-      for (auto [file, caption] : {std::pair{"perplexity_by_position.svg", "perplexity by token position (Fig. 5)"},
-                                   std::pair{"perplexity_by_strategy.svg",
-                                             "the last frame drawn by argmax, top-k and full sampling against the "
-                                             "real one, perplexity by position (Fig. 5)"}})
-        if (fs::exists(we / file)) {
-          out.text(std::string("plots/") + file, read_file(we / file));
-          sec["plots"].push_back({{"caption", caption}, {"path", std::string("plots/") + file}});
-        }
-      out.sections.insert(out.sections.begin(), sec);
-    }
-    if (!e->metrics.empty() || !e->plots.empty()) {
-      // Training curves and data plots, copied in so that the run directory stays self-contained.
-      nlohmann::json curves = nlohmann::json::array(), plots = nlohmann::json::array();
-      for (const auto& kv : e->metrics) {
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos) fail("--metrics: expected NAME=FILE, got '{}'", kv);
-        const std::string name = kv.substr(0, eq), rel = "curves/" + name + ".jsonl";
-        const std::string text = read_file(kv.substr(eq + 1));
-        out.text(rel, text);
-        // The loss, and whichever validation figures this trainer writes (train/step_loop.h metrics.jsonl).
-        nlohmann::json keys = {text.find("\"losses\":") != std::string::npos ? "losses.loss" : "loss"};
-        if (text.find("\"val\":{\"loss\":") != std::string::npos) keys.push_back("val.loss");
-        for (const char* k : {"bits_per_token", "x0_psnr", "psnr"})
-          if (text.find(fmt::format("\"{}\":", k)) != std::string::npos) keys.push_back(fmt::format("val.{}", k));
-        curves.push_back({{"caption", name}, {"path", rel}, {"keys", keys}});
-      }
-      for (const auto& p : e->plots) {
-        const std::string rel = "plots/extra-" + fs::path(p).filename().string();
-        out.text(rel, read_file(p));
-        plots.push_back({{"caption", fs::path(p).filename().string()}, {"path", rel}});
-      }
-      nlohmann::json sec = {{"title", "Training"}, {"text", "Loss curves of the training runs and data statistics."}};
-      if (!curves.empty()) sec["curves"] = curves;
-      if (!plots.empty()) sec["plots"] = plots;
-      out.sections.push_back(sec);
-    }
-    for (auto& s : out.sections) s["commands"] = {g_command_line};
-    write_file_atomic(out.dir / "eval.json", j.dump(2) + "\n");
-    nlohmann::json manifest = {{"title", "gaia evaluation"},
-                               {"subtitle", "emerging properties of the world model, measured (GAIA-1 §5)"},
-                               {"sections", out.sections}};
-    write_file_atomic(out.dir / "report.json", manifest.dump(2) + "\n");
-    report::write_report(out.dir, out.dir / "report.html");
-    std::printf("%s\nwrote %s/eval.json and %s/report.html\n", j.dump(2).c_str(), out.dir.c_str(), out.dir.c_str());
+    const fs::path out_dir = flags->out;
+    std::printf("%s\nwrote %s/eval.json and %s/report.html\n", j.dump(2).c_str(), out_dir.c_str(), out_dir.c_str());
   });
 }
 
