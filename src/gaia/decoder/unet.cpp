@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "gaia/core/error.h"
+#include "gaia/torch/attention.h"
 
 namespace gaia::decoder {
 
@@ -50,10 +51,7 @@ SpatialAttentionImpl::SpatialAttentionImpl(int64_t c, int64_t heads_) : heads(he
 namespace {
 // q, k, v [N, heads, L, hd] -> [N, L, heads * hd]; `bias` broadcastable to [N, heads, L, L] or undefined.
 torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v, const torch::Tensor& bias) {
-  auto att = torch::matmul(q, k.transpose(-2, -1)) * (1.0 / std::sqrt(double(q.size(-1))));
-  if (bias.defined()) att = att + bias;
-  auto o = torch::matmul(torch::softmax(att, -1), v);  // [N, heads, L, hd]
-  return o.transpose(1, 2).flatten(2);
+  return attention(q, k, v, bias).transpose(1, 2).flatten(2);  // [N, heads, L, hd] -> [N, L, heads * hd]
 }
 }  // namespace
 

@@ -6,6 +6,7 @@
 
 #include "gaia/core/error.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/torch/attention.h"
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::tokenizer {
@@ -106,8 +107,7 @@ ViTBlockImpl::ViTBlockImpl(int64_t d, int64_t h, int64_t mlp) : heads(h) {
 torch::Tensor ViTBlockImpl::forward(const torch::Tensor& x) {
   const auto B = x.size(0), N = x.size(1), D = x.size(2), hd = D / heads;
   auto q_k_v = qkv(norm1(x)).reshape({B, N, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, B, heads, N, hd]
-  auto att = torch::softmax(torch::matmul(q_k_v[0], q_k_v[1].transpose(-2, -1)) / std::sqrt(double(hd)), -1);
-  auto y = torch::matmul(att, q_k_v[2]).transpose(1, 2).reshape({B, N, D});
+  auto y = attention(q_k_v[0], q_k_v[1], q_k_v[2]).transpose(1, 2).reshape({B, N, D});
   auto h = x + proj(y);
   return h + fc2(F::gelu(fc1(norm2(h))));
 }

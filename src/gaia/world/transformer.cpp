@@ -9,6 +9,8 @@
 
 #include <torch/version.h>
 
+#include "gaia/torch/attention.h"
+
 namespace gaia::world {
 
 namespace F = torch::nn::functional;
@@ -25,24 +27,10 @@ namespace {
 // offset + i and sees keys <= that.
 torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torch::Tensor& v, int64_t offset) {
   const int64_t Lq = q.size(2), Lk = kT.size(3);
-#if TORCH_VERSION_MAJOR >= 2
-  if (offset == 0 && Lq == Lk)
-    return at::scaled_dot_product_attention(q, kT.transpose(2, 3), v, {}, 0.0, /*is_causal=*/true);
-#endif
-  const int64_t B = q.size(0), H = q.size(1), hd = q.size(3);
-  const double scale = 1.0 / std::sqrt(double(hd));
-  auto q3 = q.reshape({B * H, Lq, hd}), kt = kT.reshape({B * H, hd, Lk});
-  torch::Tensor att;  // [B * H, Lq, Lk]
-  if (Lq > 1) {
-    // Additive causal mask fused into the product (one pass over the L x L scores instead of three).
-    auto qi = torch::arange(offset, offset + Lq, q.options().dtype(torch::kLong)).unsqueeze(1);
-    auto kj = torch::arange(Lk, q.options().dtype(torch::kLong)).unsqueeze(0);
-    auto mask = torch::zeros({Lq, Lk}, q.options()).masked_fill_(kj > qi, -std::numeric_limits<float>::infinity());
-    att = torch::baddbmm(mask, q3, kt, /*beta=*/1.0, /*alpha=*/scale);
-  } else {
-    att = torch::bmm(q3, kt) * scale;
-  }
-  return torch::bmm(torch::softmax(att, -1), v.reshape({B * H, Lk, hd})).view({B, H, Lq, hd});
+  const auto k = kT.transpose(2, 3);
+  if (offset == 0 && Lq == Lk) return attention(q, k, v, {}, /*causal=*/true);
+  if (Lq == 1) return attention(q, k, v);  // one query after the cached keys sees all of them
+  return attention(q, k, v, causal_mask(Lq, Lk, offset, q.options()));
 }
 
 // The two inner loops of one query's attention, compiled for AVX2 as well as the baseline x86-64 ISA where the
