@@ -1,7 +1,7 @@
 // Config registry (YAML, --set, unknown keys) and `gaia plan` against the paper's figures.
 #include "gaia/config.h"
 #include "gaia/core/error.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "test_util.h"
 
 #include <algorithm>
@@ -127,7 +127,7 @@ TEST(Config, NumbersAreReadAsWritten) {
 
 TEST(Plan, PaperConfigMatchesThePaper) {
   Config c = load("paper.yaml");
-  plan::Plan p = plan::make_plan(c);
+  sizing::Plan p = sizing::make_plan(c);
   EXPECT_EQ(p.image_tokens, 576);             // §4.1: 18 x 32
   EXPECT_EQ(c.step_tokens(), 610);            // §2.1: m + n + l = 610
   EXPECT_EQ(p.sequence_length, 15860);        // §4.2: 26 x 610
@@ -141,12 +141,12 @@ TEST(Plan, PaperConfigMatchesThePaper) {
 TEST(Plan, WorldModelCountFollowsTheGptFormula) {
   Config c = load("tiny.yaml");
   const int64_t d = c.world.d_model, L = c.world.n_layers;
-  EXPECT_EQ(plan::world_params(c).non_embedding, L * (12 * d * d + 13 * d) + 2 * d);
+  EXPECT_EQ(sizing::world_params(c).non_embedding, L * (12 * d * d + 13 * d) + 2 * d);
   c.world.n_layers *= 2;
-  EXPECT_EQ(plan::world_params(c).non_embedding, 2 * L * (12 * d * d + 13 * d) + 2 * d);
+  EXPECT_EQ(sizing::world_params(c).non_embedding, 2 * L * (12 * d * d + 13 * d) + 2 * d);
   // Tiny is ~0.1M parameters as DESIGN.md promises; default is a few million.
-  EXPECT_LT(plan::world_params(load("tiny.yaml")).total, 200000);
-  int64_t def = plan::world_params(load("default.yaml")).total;
+  EXPECT_LT(sizing::world_params(load("tiny.yaml")).total, 200000);
+  int64_t def = sizing::world_params(load("default.yaml")).total;
   EXPECT_GT(def, 1000000);
   EXPECT_LT(def, 20000000);
 }

@@ -17,7 +17,7 @@
 #include "gaia/decoder/trainer.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/decoder/video.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/ema.h"
 #include "test_util.h"
@@ -208,7 +208,7 @@ TEST(DecoderTasks, TasksAreDrawnEquallyAndInterpolationUpsamples) {
 TEST(DecoderUNet, ShapesAndParameterCountMatchThePlan) {
   for (auto c : {tiny(), Config()}) {
     VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
-    EXPECT_EQ(m->parameter_count(), plan::decoder_params(c).total) << c.name;
+    EXPECT_EQ(m->parameter_count(), sizing::decoder_params(c).total) << c.name;
   }
   Config c = tiny();
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
-#include "gaia/control/text.h"
+#include "gaia/emerging/text.h"
 #include "gaia/data/episode.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/trainer.h"
@@ -163,7 +163,7 @@ TEST(ShippedModelsSlow, SceneProbeReadsDecodedRealFramesOfEachPromptedKind) {
     GTEST_SKIP() << "models/tokenizer.safetensors or probe-scene.safetensors not shipped";
   test::TempDir d;
   auto tok = fresh_tokens(d, {{"clear", "day"}, {"rain", "dusk"}, {"fog", "night"}, {"snow", "day"}, {"overcast", "dusk"}});
-  control::Models m;
+  emerging::Models m;
   m.tok = tokenizer::load_tokenizer(model("tokenizer.safetensors"), torch::kCPU);
   m.info.grid_h = 9;
   m.info.grid_w = 16;
@@ -171,7 +171,7 @@ TEST(ShippedModelsSlow, SceneProbeReadsDecodedRealFramesOfEachPromptedKind) {
   world::TokenDataset tokens(tok);
   std::vector<size_t> all(tokens.ids().size());
   std::iota(all.begin(), all.end(), size_t(0));
-  auto j = control::real_decoded_accuracy(m, tokens, all, 8);
+  auto j = emerging::real_decoded_accuracy(m, tokens, all, 8);
   EXPECT_EQ(j["episodes"].get<int>(), 5) << j.dump();  // overcast is no prompted weather, but dusk is a prompted time
   // Each prompted value's accuracy is a share of its drives' 8 frames each; an attribute's is its values' mean.
   const std::map<std::string, int> drives = {{"clear", 1}, {"rain", 1}, {"fog", 1}, {"snow", 1},

@@ -3,7 +3,7 @@
 
 #include "gaia/config.h"
 #include "gaia/core/error.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/tokenizer/discriminator.h"
 #include "test_util.h"
@@ -59,11 +59,11 @@ TEST(Tokenizer, ShapesAndParameterCountsMatchPlanForEveryConfig) {
   for (auto name : {"tiny.yaml", "default.yaml"}) {
     Config c = load(name);
     ImageTokenizer t(c);
-    EXPECT_EQ(t->parameter_count(), plan::tokenizer_params(c).total) << name;
+    EXPECT_EQ(t->parameter_count(), sizing::tokenizer_params(c).total) << name;
     PatchDiscriminator d(c.tokenizer);
     int64_t nd = 0;
     for (auto& p : d->parameters()) nd += p.numel();
-    EXPECT_EQ(nd, plan::discriminator_params(c)) << name;
+    EXPECT_EQ(nd, sizing::discriminator_params(c)) << name;
     torch::NoGradGuard ng;
     auto x = torch::rand({2, 3, c.data.height, c.data.width}) * 2 - 1;
     auto o = t->forward(x);

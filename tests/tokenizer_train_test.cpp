@@ -14,7 +14,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
@@ -163,7 +163,7 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineAndTokenBlocksAndKeepsEveryCode) {
   g.tokenizer.refine_blocks = 2;
   g.tokenizer.token_blocks = 1;
   g.tokenizer.disc_start = 1000000;
-  ASSERT_EQ(tokenizer::ImageTokenizer(g)->parameter_count(), plan::tokenizer_params(g).total);
+  ASSERT_EQ(tokenizer::ImageTokenizer(g)->parameter_count(), sizing::tokenizer_params(g).total);
   tokenizer::TrainOptions o;
   o.dataset = dir / "ds";
   o.decoder_only = true;

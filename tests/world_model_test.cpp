@@ -5,7 +5,7 @@
 #include <torch/torch.h>
 
 #include "gaia/config.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/world/calibrate.h"
 #include "gaia/world/distill.h"
@@ -128,7 +128,7 @@ TEST(WorldModel, ParameterCountEqualsThePlan) {
   for (auto name : {"tiny.yaml", "default.yaml"}) {
     Config c = Config::load(test::source_dir() / "configs" / name);
     WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
-    EXPECT_EQ(m->parameter_count(/*with_word_embedding=*/false), plan::world_params(c).total) << name;
+    EXPECT_EQ(m->parameter_count(/*with_word_embedding=*/false), sizing::world_params(c).total) << name;
   }
 }
 
@@ -139,8 +139,8 @@ TEST(WorldModel, ActionMlpStartsAtTheLinearEmbeddingAndBends) {
   Config c = tiny(), cm = tiny();
   cm.world.action_mlp = 8;
   WorldModel with(cm.world, cm.image_tokens(), cm.tokenizer.codebook_size);
-  EXPECT_EQ(with->parameter_count(false), plan::world_params(cm).total);
-  EXPECT_GT(plan::world_params(cm).total, plan::world_params(c).total);
+  EXPECT_EQ(with->parameter_count(false), sizing::world_params(cm).total);
+  EXPECT_GT(sizing::world_params(cm).total, sizing::world_params(c).total);
 
   auto lin = small_model(c, 3), mlp = small_model(cm, 4);
   train::init_from(*mlp, *lin, "linear", [](const std::string& k) { return k.find("_mlp.") != std::string::npos; });

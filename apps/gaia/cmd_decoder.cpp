@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/progress.h"
@@ -158,7 +158,7 @@ void register_decoder(CLI::App& app) {
       if (!world_path->empty()) {
         world::WorldInfo info;
         wm = world::load_world(*world_path, dev, &info);
-        control::check_tokenizer_fits(info, *world_path, t, *tok);
+        emerging::check_tokenizer_fits(info, *world_path, t, *tok);
         auto clip_no = std::make_shared<uint64_t>(0);
         const int64_t P = *prompt_frames;
         o.generate = [wm, P, clip_no, seed = o.seed](const torch::Tensor& tokens, const torch::Tensor& actions) {

@@ -4,7 +4,7 @@
 #include <cstdio>
 
 #include "common.h"
-#include "gaia/control/eval.h"
+#include "gaia/emerging/eval.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
 #include "gaia/torch/tensor_io.h"
@@ -18,9 +18,9 @@ struct EvalFlags {
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
       action_negative = "mirror", commands = "default";
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
-  int long_rollouts = control::RolloutEvalOptions{}.long_rollouts;
+  int long_rollouts = emerging::RolloutEvalOptions{}.long_rollouts;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
-  std::vector<double> scales = control::TextEvalOptions{}.scales;
+  std::vector<double> scales = emerging::TextEvalOptions{}.scales;
   std::vector<std::string> metrics, plots;  // NAME=metrics.jsonl of training runs; extra SVG plots
 };
 
@@ -57,7 +57,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--commands", e->commands,
                   "action control's commands: default (straight, left, right, strong-left, strong-right, drift-right, "
                   "slow, fast) or sweep (the steering response curve: 8 to 40 1/km right, 8 to 30 1/km left)")
-      ->check(CLI::IsMember(control::kCommandSets));
+      ->check(CLI::IsMember(emerging::kCommandSets));
   cmd->add_option("--scales", e->scales,
                   "guidance scales for text control (default 0,1,2,4,8; the last also runs with the negative prompt "
                   "and with the schedules)")
@@ -79,11 +79,11 @@ void register_eval(CLI::App& app) {
     Config run = resolve_config(*flags);
     apply_threads(run);
     if (flags->out.empty()) fail("gaia eval: --out DIR is required");
-    const auto parts = control::parse_parts(e->only);
+    const auto parts = emerging::parse_parts(e->only);
     if (parts.count("long") && e->long_rollouts < 1)  // before any model is loaded or part is run
       fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
-    auto m = control::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
+    auto m = emerging::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
     apply_sampling_sets(*flags, "world", kWorldSamplingKeys, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())
@@ -92,7 +92,7 @@ void register_eval(CLI::App& app) {
     if (!e->dataset.empty()) raw = std::make_unique<data::Dataset>(e->dataset);
     else if (parts.count("action")) std::printf("note: no EPISODES dataset: action control without the counterfactual replay\n");
 
-    control::EvalOptions o;
+    emerging::EvalOptions o;
     o.parts = parts;
     world::SamplingOptions sampling;
     sampling.top_k = e->top_k > 0 ? e->top_k : m.info.config.world.top_k;  // paper §5.1: top-k sampling
@@ -129,7 +129,7 @@ void register_eval(CLI::App& app) {
     o.plots = e->plots;
     o.command_line = g_command_line;
     ProgressBar bar(int64_t(parts.size()), "eval");
-    auto j = control::run_eval(m, ds, raw.get(), o, flags->out, [&](int done, int total, const std::string& what) {
+    auto j = emerging::run_eval(m, ds, raw.get(), o, flags->out, [&](int done, int total, const std::string& what) {
       bar.update(done, what);
       if (done == total) bar.finish();
     });

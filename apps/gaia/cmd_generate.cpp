@@ -6,11 +6,11 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
 #include "gaia/data/video_io.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/synth/synth.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
@@ -107,7 +107,7 @@ void register_generate(CLI::App& app) {
     Config tok_cfg;
     if (!g->tokenizer.empty()) {
       tok = tokenizer::load_tokenizer(g->tokenizer, dev, &tok_cfg);
-      control::check_tokenizer_fits(info, g->world, tok, g->tokenizer);  // before anything is written
+      emerging::check_tokenizer_fits(info, g->world, tok, g->tokenizer);  // before anything is written
     }
     if (!g->tokens.empty()) {
       world::TokenDataset ds(g->tokens, info.K);
@@ -194,7 +194,7 @@ void register_generate(CLI::App& app) {
       fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
 
     const int passes = o.guidance.active() ? (p.actions.defined() && p.text_ids.defined() ? 3 : 2) : 1;
-    plan::check_memory(plan::rollout_memory_bytes(info.config, g->futures, steps, passes, bool(tok)),
+    sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, bool(tok)),
                        fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");
     auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });

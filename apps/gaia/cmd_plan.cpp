@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 
 namespace gaia::app {
 
@@ -28,7 +28,7 @@ void register_plan(CLI::App& app) {
                     k.range.bounded() ? k.range.str().c_str() : "");
       return;
     }
-    plan::Plan p = plan::make_plan(c);
+    sizing::Plan p = sizing::make_plan(c);
     if (*json) {
       nlohmann::json j = {{"config", c.name},
                           {"tokenizer_params", p.tokenizer.total},
@@ -42,7 +42,7 @@ void register_plan(CLI::App& app) {
                           {"world_flops_per_token", p.world_flops_per_token}};
       std::printf("%s\n", j.dump(2).c_str());
     } else {
-      std::fputs(plan::format_plan(p, c).c_str(), stdout);
+      std::fputs(sizing::format_plan(p, c).c_str(), stdout);
     }
   });
 }

@@ -11,7 +11,7 @@
 #include "gaia/decoder/evaluate.h"
 #include "gaia/decoder/io.h"
 #include "gaia/eval/metrics.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
@@ -112,7 +112,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     if (on_note) on_note(s);
   };
   // Weights, gradients, AdamW's two moments and the EMA copy in float32, before any of it is allocated.
-  plan::check_memory(20.0 * double(plan::decoder_params(cfg).total), "training this video decoder (decoder.*)");
+  sizing::check_memory(20.0 * double(sizing::decoder_params(cfg).total), "training this video decoder (decoder.*)");
   train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
   auto tok = tokenizer::load_tokenizer(opt.tokenizer, dev);
   for (auto& p : tok->parameters()) p.set_requires_grad(false);

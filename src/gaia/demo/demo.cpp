@@ -8,7 +8,7 @@
 #include <fmt/ranges.h>
 #include <opencv2/imgproc.hpp>
 
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
 #include "gaia/data/episode.h"
@@ -53,7 +53,7 @@ struct VideoPrompt {
   std::unique_ptr<data::Episode> episode;     // the procedural drive, for its counterfactual replay
 };
 
-VideoPrompt video_prompt(const DemoOptions& o, control::Models& m, const fs::path& out, int stride) {
+VideoPrompt video_prompt(const DemoOptions& o, emerging::Models& m, const fs::path& out, int stride) {
   const auto& wc = m.info.config;
   const int64_t P = o.prompt_frames, F = o.frames;
   VideoPrompt vp;
@@ -110,7 +110,7 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   const auto dev = parse_device(o.device);
   const fs::path world_w = need("world.safetensors"), tok_w = need("tokenizer.safetensors");  // checked in order
   const fs::path dyn_w = need("probe-dynamics.safetensors"), scene_w = need("probe-scene.safetensors");
-  auto m = control::load_models(world_w, tok_w, dyn_w, scene_w, dev);
+  auto m = emerging::load_models(world_w, tok_w, dyn_w, scene_w, dev);
   const fs::path decoder_w = o.models / "decoder.safetensors";
   const auto& wc = m.info.config;
   const int64_t P = o.prompt_frames, F = o.frames;
@@ -197,8 +197,8 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   }
 
   // 6. Decoding: the tokenizer's decoder for every rollout, the video decoder for the first future.
-  auto f1 = control::decode(m, r1.tokens), fsteer = control::decode(m, rs.tokens), f2 = control::decode(m, r2.tokens),
-       f3 = control::decode(m, r3.tokens);
+  auto f1 = emerging::decode(m, r1.tokens), fsteer = emerging::decode(m, rs.tokens), f2 = emerging::decode(m, r2.tokens),
+       f3 = emerging::decode(m, r3.tokens);
   auto video = [&](const std::string& rel, const std::vector<cv::Mat>& frames, double fps) {
     fs::create_directories((out / rel).parent_path());
     data::write_gif(out / rel, frames, fps);
@@ -206,24 +206,24 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   };
   const double show = rate / 2;  // 6.25 Hz frames shown at half speed: short clips are easier to follow
   video("videos/futures.gif",
-        control::tile(Rows{outlined(f1[0], P), outlined(f1[1], P), outlined(f1[2], P)}, {"future 1", "future 2", "future 3"}),
+        emerging::tile(Rows{outlined(f1[0], P), outlined(f1[1], P), outlined(f1[2], P)}, {"future 1", "future 2", "future 3"}),
         show);
-  video("videos/prompt.gif", control::tile(Rows{outlined(vp.frames, P)}, {"prompt"}), show);
+  video("videos/prompt.gif", emerging::tile(Rows{outlined(vp.frames, P)}, {"prompt"}), show);
   video("videos/steer_generated.gif",
-        control::tile(Rows{outlined(fsteer[0], P), outlined(fsteer[1], P)}, {"left (model)", "right (model)"}), show);
+        emerging::tile(Rows{outlined(fsteer[0], P), outlined(fsteer[1], P)}, {"left (model)", "right (model)"}), show);
   if (!truth.empty())
     video("videos/steer_truth.gif",
-          control::tile(Rows{outlined(truth[0], P), outlined(truth[1], P)}, {"left (replay)", "right (replay)"}), show);
-  if (!vp.continuation.empty()) video("videos/real.gif", control::tile(Rows{outlined(vp.continuation, P)}, {"real"}), show);
+          emerging::tile(Rows{outlined(truth[0], P), outlined(truth[1], P)}, {"left (replay)", "right (replay)"}), show);
+  if (!vp.continuation.empty()) video("videos/real.gif", emerging::tile(Rows{outlined(vp.continuation, P)}, {"real"}), show);
   std::vector<std::string> text_labels;
   for (const auto& t : texts) text_labels.push_back("\"" + t.prompt + "\"");
-  video("videos/text.gif", control::tile(Rows(f2.begin(), f2.end()), text_labels), show);
-  video("videos/unconditional.gif", control::tile(Rows{f3[0]}, {"unconditional"}), show);
+  video("videos/text.gif", emerging::tile(Rows(f2.begin(), f2.end()), text_labels), show);
+  video("videos/unconditional.gif", emerging::tile(Rows{f3[0]}, {"unconditional"}), show);
 
   // Probe read-back of what the demo asked for.
   auto read_curv = [&](const std::vector<cv::Mat>& f) {  // NaN (null in the JSON) when too short for the probe
     if (int64_t(f.size()) - (P - 1) < m.dynamics->frames) return std::nan("");
-    return control::read_dynamics(m, std::vector<cv::Mat>(f.begin() + P - 1, f.end())).select(1, 1).mean().item<double>();
+    return emerging::read_dynamics(m, std::vector<cv::Mat>(f.begin() + P - 1, f.end())).select(1, 1).mean().item<double>();
   };
   nlohmann::json readback = {{"steer_left_curvature_per_km", 1000 * read_curv(fsteer[0])},
                              {"steer_right_curvature_per_km", 1000 * read_curv(fsteer[1])},
@@ -235,7 +235,7 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   for (size_t i = 0; i < texts.size(); ++i) {
     const auto& t = texts[i];
     const auto& names = t.attribute == 0 ? probe::weather_classes() : probe::time_classes();
-    auto cls = control::read_scene(m, f2[i]).select(1, t.attribute).cpu();  // [F] class ids
+    auto cls = emerging::read_scene(m, f2[i]).select(1, t.attribute).cpu();  // [F] class ids
     std::map<std::string, int> read;
     for (int64_t k = 0; k < cls.size(0); ++k) ++read[names[size_t(cls[k].item<int64_t>())]];
     const int hits = read.count(t.read_as) ? read[t.read_as] : 0;

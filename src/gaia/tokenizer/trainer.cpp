@@ -10,7 +10,7 @@
 #include "gaia/data/frame_sampler.h"
 #include "gaia/data/geofence.h"
 #include "gaia/eval/metrics.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/tokenizer/discriminator.h"
 #include "gaia/tokenizer/io.h"
@@ -50,7 +50,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     if (on_note) on_note(s);
   };
   // Weights, gradients and AdamW's two moments in float32 (tokenizer and discriminator), before any is allocated.
-  plan::check_memory(16.0 * double(plan::tokenizer_params(cfg).total + plan::discriminator_params(cfg)),
+  sizing::check_memory(16.0 * double(sizing::tokenizer_params(cfg).total + sizing::discriminator_params(cfg)),
                      "training this tokenizer (tokenizer.*)");
   train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
 

@@ -5,7 +5,7 @@
 #include <fstream>
 
 #include "gaia/core/error.h"
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
@@ -49,7 +49,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     if (on_note) on_note(s);
   };
   // Weights, gradients and AdamW's two moments in float32, before any of it is allocated.
-  plan::check_memory(16.0 * double(plan::world_params(cfg).total), "training this world model (world.*)");
+  sizing::check_memory(16.0 * double(sizing::world_params(cfg).total), "training this world model (world.*)");
   train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
 
   // A directory states K in dataset.json; a bare token .npy takes it from the config, never from its largest id.

@@ -1,4 +1,4 @@
-#include "gaia/control/rollouts.h"
+#include "gaia/emerging/rollouts.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include "gaia/eval/svg_plot.h"
 #include "gaia/world/rollout.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 double copy_rate(const torch::Tensor& frames) {
   if (frames.size(0) < 2) return std::nan("");
@@ -236,4 +236,4 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   return j;
 }
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -3,10 +3,10 @@
 // that name a weather, a time of day or a traffic-light state; the scene probe reads the attribute back from the
 // decoded frames. Measured as the probe's accuracy on the prompted attribute against the classifier-free guidance
 // scale (eq. 2), with a negative prompt, and with the token / frame guidance schedules (Fig. 6).
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/world/sampling.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 struct TextTarget {
   int attribute;          // 0 weather, 1 time of day, 2 traffic light (probe heads)
@@ -36,4 +36,4 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
 // real: the token dataset whose held-out episodes give the ceiling above; nullptr skips it.
 nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real = nullptr);
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

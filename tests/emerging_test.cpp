@@ -1,4 +1,4 @@
-// Token statistics of the long-rollout evaluation (control/rollouts.h) on frames with known answers.
+// Token statistics of the long-rollout evaluation (emerging/rollouts.h) on frames with known answers.
 #include <cmath>
 
 #include <torch/torch.h>
@@ -6,23 +6,23 @@
 #include <array>
 #include <cstdio>
 
-#include "gaia/control/common.h"
-#include "gaia/control/rollouts.h"
+#include "gaia/emerging/common.h"
+#include "gaia/emerging/rollouts.h"
 #include "gaia/probe/trainer.h"
 #include "gaia/eval/svg_plot.h"
 #include "test_util.h"
 
 using namespace gaia;
 
-TEST(ControlStats, CopyRateAndEntropyOfKnownFrames) {
+TEST(EmergingStats, CopyRateAndEntropyOfKnownFrames) {
   // Three frames of 4 tokens; frame 1 repeats frame 0 in 3 of 4 positions, frame 2 repeats frame 1 in 1 of 4.
   auto f = torch::tensor({0, 1, 2, 3, 0, 1, 2, 0, 5, 5, 5, 0}, torch::kLong).view({3, 4});
-  EXPECT_DOUBLE_EQ(control::copy_rate(f), (3.0 + 1.0) / 8.0);
-  EXPECT_TRUE(std::isnan(control::copy_rate(f.slice(0, 0, 1))));  // one frame: no pairs
+  EXPECT_DOUBLE_EQ(emerging::copy_rate(f), (3.0 + 1.0) / 8.0);
+  EXPECT_TRUE(std::isnan(emerging::copy_rate(f.slice(0, 0, 1))));  // one frame: no pairs
   // A frozen video copies everything; four equally frequent tokens have 2 bits of entropy, one token 0 bits.
-  EXPECT_DOUBLE_EQ(control::copy_rate(f[0].unsqueeze(0).repeat({5, 1})), 1.0);
-  EXPECT_NEAR(control::unigram_entropy_bits(f[0].unsqueeze(0), 16), 2.0, 1e-12);
-  EXPECT_NEAR(control::unigram_entropy_bits(torch::full({2, 4}, 7, torch::kLong), 16), 0.0, 1e-12);
+  EXPECT_DOUBLE_EQ(emerging::copy_rate(f[0].unsqueeze(0).repeat({5, 1})), 1.0);
+  EXPECT_NEAR(emerging::unigram_entropy_bits(f[0].unsqueeze(0), 16), 2.0, 1e-12);
+  EXPECT_NEAR(emerging::unigram_entropy_bits(torch::full({2, 4}, 7, torch::kLong), 16), 0.0, 1e-12);
 }
 
 // Bar charts with negative values (a right turn's curvature): bars of +v and -v have the same height and meet at
@@ -45,9 +45,9 @@ TEST(SvgPlot, BarsHangBelowZeroForNegativeValues) {
 // The dynamics read-back slides the probe's K-frame window over a sequence one step at a time: S frames give
 // S - K + 1 readings, each the probe on exactly its window (speed and curvature in m/s and 1/m); too short a
 // sequence is one clear error that names the probe's window.
-TEST(ControlReadback, DynamicsWindowsSlideOverTheSequence) {
+TEST(EmergingReadback, DynamicsWindowsSlideOverTheSequence) {
   torch::manual_seed(3);
-  control::Models m;
+  emerging::Models m;
   m.dynamics = probe::ProbeNet(probe::ProbeKind::kDynamics, 3);
   m.dynamics->eval();
   std::vector<cv::Mat> frames;
@@ -56,7 +56,7 @@ TEST(ControlReadback, DynamicsWindowsSlideOverTheSequence) {
     cv::randu(f, cv::Scalar::all(0), cv::Scalar::all(255));
     frames.push_back(f);
   }
-  auto y = control::read_dynamics(m, frames);
+  auto y = emerging::read_dynamics(m, frames);
   ASSERT_EQ(y.sizes(), (std::vector<int64_t>{3, 2}));
   torch::NoGradGuard ng;
   for (int64_t k = 0; k < 3; ++k) {
@@ -64,6 +64,6 @@ TEST(ControlReadback, DynamicsWindowsSlideOverTheSequence) {
     EXPECT_NEAR(y[k][0].item<double>(), want[0].item<double>() * world::kSpeedScale, 1e-4);
     EXPECT_NEAR(y[k][1].item<double>(), want[1].item<double>() * world::kCurvatureScale, 1e-7);
   }
-  auto err = test::error_of([&] { control::read_dynamics(m, {frames[0], frames[1]}); });
+  auto err = test::error_of([&] { emerging::read_dynamics(m, {frames[0], frames[1]}); });
   EXPECT_NE(err.find("reads 3 consecutive frames"), std::string::npos) << err;
 }

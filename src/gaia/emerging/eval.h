@@ -10,13 +10,13 @@
 
 #include <nlohmann/json.hpp>
 
-#include "gaia/control/action.h"
-#include "gaia/control/common.h"
-#include "gaia/control/rollouts.h"
-#include "gaia/control/text.h"
+#include "gaia/emerging/action.h"
+#include "gaia/emerging/common.h"
+#include "gaia/emerging/rollouts.h"
+#include "gaia/emerging/text.h"
 #include "gaia/data/episode.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 struct EvalOptions {
   std::set<std::string> parts{"action", "text", "futures", "long"};
@@ -38,4 +38,4 @@ nlohmann::json run_eval(Models& m, const world::TokenDataset& ds, const data::Da
 // The parts `--only` names ("action,text"), each checked: an unknown one is an error naming it.
 std::set<std::string> parse_parts(const std::string& only);
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -1,4 +1,4 @@
-#include "gaia/plan/plan.h"
+#include "gaia/sizing/sizing.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +9,7 @@
 #include "gaia/core/error.h"
 #include "gaia/eval/metrics.h"
 
-namespace gaia::plan {
+namespace gaia::sizing {
 
 namespace {
 
@@ -233,4 +233,4 @@ void check_memory(double bytes, const std::string& what) {
     fail("{} would need about {:.1f} GB of memory, but {:.1f} GB are available", what, bytes / 1e9, have / 1e9);
 }
 
-}  // namespace gaia::plan
+}  // namespace gaia::sizing

@@ -1,4 +1,4 @@
-#include "gaia/control/text.h"
+#include "gaia/emerging/text.h"
 
 #include <map>
 
@@ -6,7 +6,7 @@
 #include "gaia/eval/svg_plot.h"
 #include "gaia/world/rollout.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 std::vector<TextTarget> text_targets() {
   return {{0, "rain", "heavy rain", "clear skies"},   {0, "fog", "thick fog", "clear skies"},
@@ -190,4 +190,4 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
   return j;
 }
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

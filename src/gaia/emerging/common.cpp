@@ -1,4 +1,4 @@
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 
 #include <algorithm>
 
@@ -10,7 +10,7 @@
 #include "gaia/tokenizer/io.h"
 #include "gaia/world/batch.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
                    const fs::path& scene_probe, const torch::Device& dev) {
@@ -150,4 +150,4 @@ void Output::text(const std::string& rel, const std::string& content) const {
   write_file_atomic(dir / rel, content);
 }
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -8,10 +8,10 @@
 //             real held-out token episodes: no collapse into repetition and no drift. One drive's windows vary as
 //             much as real drives do (a stop at a junction copies twice as much as the mean), so the comparison is
 //             of means, each with its standard error
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/world/sampling.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 struct RolloutEvalOptions {
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4;
@@ -30,4 +30,4 @@ double unigram_entropy_bits(const torch::Tensor& frames, int64_t K);
 nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out);
 nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out);
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -8,7 +8,7 @@
 
 #include "gaia/config.h"
 
-namespace gaia::plan {
+namespace gaia::sizing {
 
 struct ParamCount {
   int64_t total = 0;
@@ -49,4 +49,4 @@ double available_memory_bytes();
 void check_memory(double bytes, const std::string& what);
 std::string format_plan(const Plan& p, const Config& c);  // human-readable table for the CLI
 
-}  // namespace gaia::plan
+}  // namespace gaia::sizing

@@ -6,11 +6,11 @@
 //   - the same rollouts without action conditioning (null actions), the baseline the conditioning must beat;
 //   - against the counterfactual replay of the procedural world under the same commands (per-frame PSNR of the
 //     decoded frames and FD-probe), when the raw dataset the tokens came from is given.
-#include "gaia/control/common.h"
+#include "gaia/emerging/common.h"
 #include "gaia/data/episode.h"
 #include "gaia/world/sampling.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 struct Command {
   std::string name;
@@ -48,4 +48,4 @@ struct ActionEvalOptions {
 nlohmann::json action_control(Models& m, const world::TokenDataset& tokens, const data::Dataset* raw,
                               const ActionEvalOptions& o, Output& out);
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -18,7 +18,7 @@
 #include "gaia/world/io.h"
 #include "gaia/world/token_dataset.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 struct Models {
   world::WorldModel world{nullptr};
@@ -69,4 +69,4 @@ struct Output {
   void text(const std::string& rel, const std::string& content) const;
 };
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

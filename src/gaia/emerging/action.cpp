@@ -1,4 +1,4 @@
-#include "gaia/control/action.h"
+#include "gaia/emerging/action.h"
 
 #include <cmath>
 
@@ -12,7 +12,7 @@
 #include "gaia/world/batch.h"
 #include "gaia/world/rollout.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 std::vector<Command> action_commands(const std::string& set) {
   if (set == "default")
@@ -353,4 +353,4 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   return j;
 }
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging

@@ -1,4 +1,4 @@
-#include "gaia/control/eval.h"
+#include "gaia/emerging/eval.h"
 
 #include <fmt/format.h>
 
@@ -6,7 +6,7 @@
 #include "gaia/core/json_file.h"
 #include "gaia/report/report.h"
 
-namespace gaia::control {
+namespace gaia::emerging {
 
 std::set<std::string> parse_parts(const std::string& only) {
   std::set<std::string> parts;
@@ -112,4 +112,4 @@ nlohmann::json run_eval(Models& m, const world::TokenDataset& ds, const data::Da
   return j;
 }
 
-}  // namespace gaia::control
+}  // namespace gaia::emerging
