@@ -8,7 +8,6 @@
 namespace gaia::decoder {
 
 namespace F = torch::nn::functional;
-using tokenizer::group_norm;
 
 torch::Tensor timestep_embedding(const torch::Tensor& t, int64_t dim) {
   // Transformer-style sinusoids of 1000 t (DDPM convention), half sine and half cosine.
@@ -136,7 +135,7 @@ VideoUNetImpl::VideoUNetImpl(const DecoderConfig& c, int64_t K_, int64_t D_) : c
       skips.push_back(w);
     }
     if (i + 1 < L) {
-      downsamplers->push_back(tokenizer::Downsample(w));
+      downsamplers->push_back(Downsample(w));
       skips.push_back(w);
     }
   }
@@ -151,7 +150,7 @@ VideoUNetImpl::VideoUNetImpl(const DecoderConfig& c, int64_t K_, int64_t D_) : c
       up_level.push_back(i);
       w = wo;
     }
-    if (i > 0) upsamplers->push_back(tokenizer::Upsample(w));
+    if (i > 0) upsamplers->push_back(Upsample(w));
   }
   norm_out = register_module("norm_out", group_norm(w));
   conv_out = register_module("conv_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(w, 3, 3).padding(1)));
@@ -194,7 +193,7 @@ torch::Tensor VideoUNetImpl::forward(const DenoiserInput& in) {
       skips.push_back(x);
     }
     if (i + 1 < L) {
-      x = downsamplers[size_t(i)]->as<tokenizer::Downsample>()->forward(x);
+      x = downsamplers[size_t(i)]->as<Downsample>()->forward(x);
       skips.push_back(x);
     }
   }
@@ -208,7 +207,7 @@ torch::Tensor VideoUNetImpl::forward(const DenoiserInput& in) {
       skips.pop_back();
       x = up[li++]->as<UNetLayer>()->forward(torch::cat({x, s}, 1), emb, T, in.temporal);
     }
-    if (i > 0) x = upsamplers[ui++]->as<tokenizer::Upsample>()->forward(x);
+    if (i > 0) x = upsamplers[ui++]->as<Upsample>()->forward(x);
   }
   x = conv_out(F::silu(norm_out(x)));  // [N, 3, H, W]
   return x.view({B, T, 3, H, W});

@@ -10,7 +10,7 @@
 #include <torch/torch.h>
 
 #include "gaia/config.h"
-#include "gaia/tokenizer/blocks.h"
+#include "gaia/torch/conv_blocks.h"
 
 namespace gaia::decoder {
 

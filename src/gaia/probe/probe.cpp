@@ -1,7 +1,7 @@
 #include "gaia/probe/probe.h"
 
 #include "gaia/core/error.h"
-#include "gaia/tokenizer/blocks.h"
+#include "gaia/torch/conv_blocks.h"
 
 namespace gaia::probe {
 
@@ -42,10 +42,10 @@ ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t n, int64_t width)
   body = torch::nn::Sequential();
   for (int i = 0; i < 4; ++i) {
     body->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(w[i], w[i + 1], 3).stride(2).padding(1)));
-    body->push_back(tokenizer::group_norm(w[i + 1]));
+    body->push_back(group_norm(w[i + 1]));
     body->push_back(torch::nn::SiLU());
     body->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(w[i + 1], w[i + 1], 3).padding(1)));
-    body->push_back(tokenizer::group_norm(w[i + 1]));
+    body->push_back(group_norm(w[i + 1]));
     body->push_back(torch::nn::SiLU());
   }
   register_module("body", body);

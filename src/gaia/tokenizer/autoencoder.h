@@ -4,7 +4,7 @@
 #include <torch/torch.h>
 
 #include "gaia/config.h"
-#include "gaia/tokenizer/blocks.h"
+#include "gaia/torch/conv_blocks.h"
 #include "gaia/tokenizer/quantizer.h"
 
 namespace gaia::tokenizer {

@@ -1,6 +1,6 @@
 #include "gaia/tokenizer/discriminator.h"
 
-#include "gaia/tokenizer/blocks.h"
+#include "gaia/torch/conv_blocks.h"
 
 namespace gaia::tokenizer {
 

@@ -1,8 +1,9 @@
 #pragma once
-// Convolutional building blocks of the image tokenizer (VQGAN-style, Esser et al. 2021).
+// Convolutional building blocks (VQGAN-style, Esser et al. 2021) shared by the image tokenizer, the video
+// decoder's U-Net and the probes.
 #include <torch/torch.h>
 
-namespace gaia::tokenizer {
+namespace gaia {
 
 // GroupNorm with up to 32 groups that divide the width.
 torch::nn::GroupNorm group_norm(int64_t channels);
@@ -32,4 +33,4 @@ struct UpsampleImpl : torch::nn::Module {
 };
 TORCH_MODULE(Upsample);
 
-}  // namespace gaia::tokenizer
+}  // namespace gaia

@@ -1,6 +1,6 @@
-#include "gaia/tokenizer/blocks.h"
+#include "gaia/torch/conv_blocks.h"
 
-namespace gaia::tokenizer {
+namespace gaia {
 
 namespace F = torch::nn::functional;
 
@@ -38,4 +38,4 @@ torch::Tensor UpsampleImpl::forward(const torch::Tensor& x) {
   return conv(F::interpolate(x, F::InterpolateFuncOptions().scale_factor(std::vector<double>{2, 2}).mode(torch::kNearest)));
 }
 
-}  // namespace gaia::tokenizer
+}  // namespace gaia
