@@ -9,14 +9,13 @@
 namespace gaia {
 
 struct DecoderConfig {
-  // Architecture. CPU-sized (~3M parameters, a few seconds a step on 2 cores at 72x128); paper.yaml is the 2.6B of
-  // §4.3.
+  // Architecture. CPU-sized (a few M parameters at 72x128); paper.yaml is the 2.6B of §4.3.
   int channels = 32;             // base width of the 3D U-Net
   std::vector<int> channel_mult{1, 2, 4};
   int res_blocks = 1;
   std::vector<int> attn_levels{2};  // levels (0 = full resolution) that get spatial attention
-  // Levels with temporal attention. Ho et al. (2022) use every level; at full resolution it is ~T' x H x W tiny
-  // attention problems, a third of a CPU step, so the CPU default keeps it to the lower resolutions.
+  // Levels with temporal attention. Ho et al. (2022) use every level; at full resolution it is T' x H x W tiny
+  // attention problems, costly on a CPU, so the CPU default keeps it to the lower resolutions.
   std::vector<int> temporal_levels{1, 2};
   int heads = 4;
   int token_embed_dim = 64;      // conditioning token embedding width
