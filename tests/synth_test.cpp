@@ -212,7 +212,7 @@ TEST(Synth, EgoStopsAtRedLight) {
   }
 }
 
-// A wandering driver (WorldSpec::wander) steers away from the road's own curvature at random moments, so the
+// A wandering driver (SceneSpec::wander) steers away from the road's own curvature at random moments, so the
 // recorded steering carries information the road does not; it still stays near its lane.
 TEST(Synth, WanderMakesSteeringDepartFromTheRoad) {
   auto departure = [](double wander, double* max_offset) {
@@ -259,7 +259,7 @@ TEST(Synth, WanderMakesSteeringDepartFromTheRoad) {
   }
 }
 
-// A swerving driver (WorldSpec::swerve) steers open loop at random moments: strong turns both ways, never beyond
+// A swerving driver (SceneSpec::swerve) steers open loop at random moments: strong turns both ways, never beyond
 // its limit while swerving, off its lane and back again. The episode records it, and replay rebuilds it.
 TEST(Synth, SwervesSteerStronglyBothWaysAndReturnToTheLane) {
   const double limit = 0.035;

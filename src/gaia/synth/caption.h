@@ -1,5 +1,5 @@
 #pragma once
-// Plain-English captions of a synth frame, built from its structured labels (world.h: World::labels) with
+// Plain-English captions of a synth frame, built from its structured labels (scene.h: Scene::labels) with
 // seeded variation in wording and clause order, e.g. "rainy night, red light ahead, slowing behind a bus".
 #include <cstdint>
 #include <string>

@@ -111,7 +111,7 @@ struct Frame {
   cv::Mat& img;
   const Cam& cam;
   const Env& env;
-  const World& world;
+  const Scene& world;
   const cv::Mat& glow;
   bool naive;
   std::vector<Lamp2> lamps;
@@ -245,7 +245,7 @@ struct GroundDrawer {
 };
 
 void draw_ground(Frame& F, GroundDrawer& G, double s_far) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   const RoadLayout& L = W.layout();
   const Env& e = F.env;
   const double se = W.ego().s;
@@ -380,7 +380,7 @@ void draw_lamp_pair(Frame& F, const Face& f, double v0, double v1, double w, con
 }
 
 void draw_vehicle(Frame& F, const Vehicle& o) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   double x, y;
   W.road().point(o.s, o.d, x, y);
   double th = W.road().at(o.s).h;
@@ -493,7 +493,7 @@ void draw_vehicle(Frame& F, const Vehicle& o) {
 }
 
 void draw_pedestrian(Frame& F, const PedPose& q, const Pedestrian& p, double t, uint32_t id) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   double x, y;
   W.road().point(q.s, q.d, x, y);
   const double th = W.road().at(q.s).h + q.heading;
@@ -513,7 +513,7 @@ void draw_pedestrian(Frame& F, const PedPose& q, const Pedestrian& p, double t, 
 }
 
 void draw_prop(Frame& F, const Prop& p) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   const RoadPose rp = W.road().at(p.s);
   double x, y;
   W.road().point(p.s, p.d, x, y);
@@ -599,7 +599,7 @@ void draw_prop(Frame& F, const Prop& p) {
 }
 
 void draw_signal(Frame& F, const TrafficLight& l, double s, double d, double t) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   double x, y;
   W.road().point(s, d, x, y);
   const double th = W.road().at(s).h;
@@ -625,7 +625,7 @@ void draw_signal(Frame& F, const TrafficLight& l, double s, double d, double t) 
 
 // Distant hills / skyline and clouds, fixed in world azimuth so they rotate (but never translate) with the ego.
 void draw_backdrop(Frame& F) {
-  const World& W = F.world;
+  const Scene& W = F.world;
   const Env& e = F.env;
   const double heading = std::atan2(F.cam.sh, F.cam.ch);
   const double R = 4000;
@@ -779,7 +779,7 @@ Renderer::Renderer(int height, int width, CameraModel cam) : h_(height), w_(widt
     }
 }
 
-void Renderer::render(const World& world, cv::Mat& out) {
+void Renderer::render(const Scene& world, cv::Mat& out) {
   out.create(h_, w_, CV_8UC3);
   const Env env = make_env(world.spec().weather, world.spec().time_of_day);
   const Ego& ego = world.ego();
@@ -798,8 +798,8 @@ void Renderer::render(const World& world, cv::Mat& out) {
 
   // Street lamps near the ego light the ground at night.
   std::vector<Prop> props;
-  for (int64_t b = static_cast<int64_t>(std::floor((se - 30) / World::kBlock));
-       b <= static_cast<int64_t>(std::floor(s_far / World::kBlock)); ++b)
+  for (int64_t b = static_cast<int64_t>(std::floor((se - 30) / Scene::kBlock));
+       b <= static_cast<int64_t>(std::floor(s_far / Scene::kBlock)); ++b)
     for (const Prop& p : world.props_block(b))
       if (p.s > se - 30 && p.s < s_far) props.push_back(p);
   if (env.lamp > 0)

@@ -1,5 +1,5 @@
 #pragma once
-// Forward-camera rendering of a World: pinhole camera 1.45 m above the road on the ego, with pitch and roll
+// Forward-camera rendering of a Scene: pinhole camera 1.45 m above the road on the ego, with pitch and roll
 // from the body motion; flat ground layer (road, markings, pavements) lit and fogged per pixel; 3-D objects
 // (vehicles, pedestrians, trees, buildings, lamps, signals) painted far to near with anti-aliased polygons;
 // weather overlays (rain streaks, snow flakes). Deterministic: the same world state gives the same pixels.
@@ -8,7 +8,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "gaia/synth/world.h"
+#include "gaia/synth/scene.h"
 
 namespace gaia::synth {
 
@@ -22,7 +22,7 @@ class Renderer {
  public:
   Renderer(int height, int width, CameraModel cam = {});
   // Draws the world's current frame into `out` (BGR CV_8UC3, height x width).
-  void render(const World& world, cv::Mat& out);
+  void render(const Scene& world, cv::Mat& out);
   // Reference mode for benchmarks: exact per-pixel exp() for fog and lighting instead of lookup tables.
   void set_naive(bool on) { naive_ = on; }
   int height() const { return h_; }

@@ -16,10 +16,10 @@ namespace {
 
 constexpr const char* kSynthVersion = "1";
 
-WorldSpec spec_from(const SynthOptions& o, int index) {
+SceneSpec spec_from(const SynthOptions& o, int index) {
   if (o.height < 16 || o.width < 16 || o.height > 4096 || o.width > 4096)
     fail("synth: frame size {}x{} must be between 16 and 4096", o.height, o.width);
-  WorldSpec s;
+  SceneSpec s;
   s.seed = o.seed;
   s.index = index;
   s.district = o.district;
@@ -54,10 +54,10 @@ double parse_double(const std::string& s, const std::string& what) {
 std::string episode_id(uint64_t seed, int index) { return fmt::format("synth-s{}-e{:05d}", seed, index); }
 
 Simulator::Simulator(const SynthOptions& opt, int index)
-    : opt_(opt), index_(index), world_(std::make_unique<World>(spec_from(opt, index))), renderer_(opt.height, opt.width) {}
+    : opt_(opt), index_(index), world_(std::make_unique<Scene>(spec_from(opt, index))), renderer_(opt.height, opt.width) {}
 
 data::EpisodeMeta Simulator::meta() const {
-  const WorldSpec& s = world_->spec();
+  const SceneSpec& s = world_->spec();
   data::EpisodeMeta m;
   m.id = episode_id(s.seed, s.index);
   m.fps = s.fps;
@@ -98,7 +98,7 @@ data::FrameRecord Simulator::record(const ActionStep& a, bool with_image) {
   f.speed = static_cast<float>(a.speed);
   f.curvature = static_cast<float>(a.curvature);
   f.labels = world_->labels(a);
-  const WorldSpec& s = world_->spec();
+  const SceneSpec& s = world_->spec();
   f.caption = make_caption(f.labels, stream_key(s.seed, static_cast<uint64_t>(s.index), "caption",
                                                 static_cast<uint64_t>(world_->frame())));
   return f;

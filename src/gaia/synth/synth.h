@@ -14,7 +14,7 @@
 #include "gaia/core/fs.h"
 #include "gaia/data/episode.h"
 #include "gaia/synth/render.h"
-#include "gaia/synth/world.h"
+#include "gaia/synth/scene.h"
 
 namespace gaia::synth {
 
@@ -26,8 +26,8 @@ struct SynthOptions {
   std::string scene;                 // "" = random mix; random, bend, red_light, lead_vehicle, straight
   std::string district;              // "" = random; see district.h
   std::string frame_codec = "raw";
-  double wander = 0;                 // the driver's lateral wander in its lane, m (WorldSpec::wander)
-  double swerve = 0;                 // the largest curvature of the driver's open-loop swerves, 1/m (WorldSpec::swerve)
+  double wander = 0;                 // the driver's lateral wander in its lane, m (SceneSpec::wander)
+  double swerve = 0;                 // the largest curvature of the driver's open-loop swerves, 1/m (SceneSpec::swerve)
   bool overwrite = false;            // replace an existing episode with the same id
 };
 
@@ -38,8 +38,8 @@ std::string episode_id(uint64_t seed, int index);
 class Simulator {
  public:
   Simulator(const SynthOptions& opt, int index);
-  const World& world() const { return *world_; }
-  const WorldSpec& spec() const { return world_->spec(); }
+  const Scene& world() const { return *world_; }
+  const SceneSpec& spec() const { return world_->spec(); }
   data::EpisodeMeta meta() const;  // everything replay needs is in meta.extra and meta.source
   cv::Mat render();                // the current frame, BGR CV_8UC3
   ActionStep policy() { return world_->policy(); }
@@ -51,7 +51,7 @@ class Simulator {
  private:
   SynthOptions opt_;
   int index_;
-  std::unique_ptr<World> world_;
+  std::unique_ptr<Scene> world_;
   Renderer renderer_;
 };
 

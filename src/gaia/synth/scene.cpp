@@ -1,4 +1,4 @@
-#include "gaia/synth/world.h"
+#include "gaia/synth/scene.h"
 
 #include <algorithm>
 #include <cmath>
@@ -47,7 +47,7 @@ int TrafficLight::state(double t) const {
   return c < green ? 0 : c < green + amber ? 1 : 2;
 }
 
-WorldSpec resolve_spec(WorldSpec spec) {
+SceneSpec resolve_spec(SceneSpec spec) {
   if (!(spec.fps > 0 && spec.fps <= 1000)) fail("synth: fps must be in (0, 1000], got {}", spec.fps);
   if (!(spec.seconds > 0 && spec.seconds <= 3600)) fail("synth: seconds must be in (0, 3600], got {}", spec.seconds);
   if (spec.index < 0) fail("synth: episode index must be >= 0, got {}", spec.index);
@@ -83,7 +83,7 @@ WorldSpec resolve_spec(WorldSpec spec) {
   return spec;
 }
 
-World::World(const WorldSpec& s)
+Scene::Scene(const SceneSpec& s)
     : spec_(s),
       district_(&district_by_name(s.district)),
       road_(stream_key(s.seed, static_cast<uint64_t>(s.index), "road"), *district_, s.scene) {
@@ -104,7 +104,7 @@ World::World(const WorldSpec& s)
   spawn();
 }
 
-void World::spawn() {
+void Scene::spawn() {
   const uint64_t seed = spec_.seed, idx = static_cast<uint64_t>(spec_.index);
   const District& D = *district_;
   const RoadLayout& L = layout_;
@@ -289,7 +289,7 @@ void World::spawn() {
   }
 }
 
-const std::vector<Prop>& World::props_block(int64_t block) const {
+const std::vector<Prop>& Scene::props_block(int64_t block) const {
   auto it = props_.find(block);
   if (it != props_.end()) return it->second;
   std::vector<Prop> out;
@@ -350,7 +350,7 @@ const std::vector<Prop>& World::props_block(int64_t block) const {
   return props_.emplace(block, std::move(out)).first->second;
 }
 
-PedPose World::pedestrian_pose(const Pedestrian& p, double t) const {
+PedPose Scene::pedestrian_pose(const Pedestrian& p, double t) const {
   PedPose q{};
   if (p.light < 0) {  // pavement walker
     q.s = p.s0 + p.speed * (t + p.delay);
@@ -378,7 +378,7 @@ PedPose World::pedestrian_pose(const Pedestrian& p, double t) const {
   return q;
 }
 
-double World::idm(double v, double v_des, double gap, double dv) const {
+double Scene::idm(double v, double v_des, double gap, double dv) const {
   const double a_max = 1.6, b = 2.5, s0 = 2.0, T = 1.2;
   const double vd = std::max(v_des, 0.1);
   const double s_star = s0 + std::max(0.0, v * T + v * dv / (2 * std::sqrt(a_max * b)));
@@ -396,7 +396,7 @@ static double stop_accel(double v, double gap) {
   return need < 1.8 ? 1e9 : -std::min(need, 8.0);
 }
 
-bool World::lane_clear(int lane) const {
+bool Scene::lane_clear(int lane) const {
   const double dl = layout_.lane_centre(lane);
   for (auto& v : vehicles_)
     if (v.dir == 1 && std::abs(v.d - dl) < 2.0 && v.s > ego_.s - 12 - v.length / 2 && v.s < ego_.s + 25 + v.length / 2)
@@ -406,7 +406,7 @@ bool World::lane_clear(int lane) const {
   return true;
 }
 
-ActionStep World::policy() {
+ActionStep Scene::policy() {
   const double t = time(), dt = 1.0 / spec_.fps;
   const uint64_t seed = spec_.seed, idx = static_cast<uint64_t>(spec_.index);
   const District& D = *district_;
@@ -453,7 +453,7 @@ ActionStep World::policy() {
   const double lat = -dx * std::sin(ego_.h) + dy * std::cos(ego_.h);
   double k = std::clamp(2 * lat / std::max(1.0, fwd * fwd + lat * lat), -0.2, 0.2);
   if (spec_.swerve > 0) {
-    // Open-loop swerves at random moments (WorldSpec::swerve): the first after 0.5-3 s, then 1.5-5 s apart.
+    // Open-loop swerves at random moments (SceneSpec::swerve): the first after 0.5-3 s, then 1.5-5 s apart.
     while (t >= ego_.next_swerve_t) {
       Rng r(stream_key(seed, idx, "swerve", ego_.swerve_counter++));
       if (ego_.next_swerve_t < 0) {
@@ -513,7 +513,7 @@ ActionStep World::policy() {
   return {static_cast<double>(static_cast<float>(v_new)), static_cast<double>(static_cast<float>(k))};
 }
 
-int World::next_light(double& distance) const {
+int Scene::next_light(double& distance) const {
   int best = -1;
   distance = 0;
   for (size_t i = 0; i < lights_.size(); ++i) {
@@ -523,7 +523,7 @@ int World::next_light(double& distance) const {
   return best;
 }
 
-int World::lead_vehicle(double& distance) const {
+int Scene::lead_vehicle(double& distance) const {
   int best = -1;
   distance = 0;
   for (size_t i = 0; i < vehicles_.size(); ++i) {
@@ -535,7 +535,7 @@ int World::lead_vehicle(double& distance) const {
   return best;
 }
 
-void World::step(const ActionStep& act) {
+void Scene::step(const ActionStep& act) {
   const double t = time(), dt = 1.0 / spec_.fps;
   // Agents (they see the ego's state at time t).
   // Vehicles far from the ego (never visible) are dormant: they keep their speed and ignore each other,
@@ -639,7 +639,7 @@ void World::step(const ActionStep& act) {
   road_.ensure(ego_.s + 450);
 }
 
-nlohmann::json World::labels(const ActionStep& a) const {
+nlohmann::json Scene::labels(const ActionStep& a) const {
   using nlohmann::json;
   json j;
   j["weather"] = spec_.weather;

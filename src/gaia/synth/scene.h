@@ -26,7 +26,7 @@ struct ActionStep {
 };
 
 // Everything that determines a world. Random fields are resolved by resolve_spec before construction.
-struct WorldSpec {
+struct SceneSpec {
   uint64_t seed = 0;
   int index = 0;
   std::string district, weather, time_of_day, scene;  // scene: random, bend, red_light, lead_vehicle, straight
@@ -45,7 +45,7 @@ struct WorldSpec {
 
 // Fills empty district / weather / time_of_day / scene deterministically from (seed, index) and checks the
 // rest; throws gaia::Error naming an unknown value.
-WorldSpec resolve_spec(WorldSpec spec);
+SceneSpec resolve_spec(SceneSpec spec);
 
 enum class VehicleKind { Car, Van, Bus, Truck };
 const char* vehicle_name(VehicleKind k);
@@ -106,11 +106,11 @@ struct Ego {
   uint64_t swerve_counter = 0;
 };
 
-class World {
+class Scene {
  public:
-  explicit World(const WorldSpec& resolved_spec);
+  explicit Scene(const SceneSpec& resolved_spec);
 
-  const WorldSpec& spec() const { return spec_; }
+  const SceneSpec& spec() const { return spec_; }
   const District& district() const { return *district_; }
   const RoadLayout& layout() const { return layout_; }
   const Road& road() const { return road_; }
@@ -141,7 +141,7 @@ class World {
   double idm(double v, double v_des, double gap, double dv) const;
   bool lane_clear(int lane) const;
 
-  WorldSpec spec_;
+  SceneSpec spec_;
   const District* district_;
   RoadLayout layout_;
   Road road_;
