@@ -1,5 +1,5 @@
 // gaia convert: re-store a weights file (tokenizer, world model, decoder, probe) with F32 tensors as F16, and/or with
-// a sampling setting of its stored config changed (e.g. the temperature the world model is shipped to sample at),
+// a sampling setting of its stored config changed (e.g. the temperature a world model samples at by default),
 // and/or interpolated towards the weights it was fine-tuned from (core/interpolate.h).
 #include <algorithm>
 #include <cstdio>
@@ -28,7 +28,7 @@ void register_convert(CLI::App& app) {
   auto alpha = std::make_shared<double>(0.5);
   cmd->add_option("--interpolate-from", *from,
                   "weights WEIGHTS was fine-tuned from: write FROM + alpha (WEIGHTS - FROM) instead (WiSE-FT; keeps "
-                  "more of what the fine-tune cost, MODEL_CARD.md)");
+                  "more of what the fine-tune would cost)");
   auto* alpha_opt = cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS (beyond: extrapolates)")
                         ->check(kSignedNumber);
   cmd->add_option("--out", *out, "output file (may be WEIGHTS itself)")->required();

@@ -1,5 +1,5 @@
-// gaia train-all: the recorded recipe that makes every shipped model from nothing: procedural data, tokenizer
-// (+ a fine-tune without the GAN term, MODEL_CARD.md says why), tokens, world model, video decoder, both probes,
+// gaia train-all: the recipe that makes every model of models/ from nothing: procedural data, tokenizer
+// (+ a fine-tune without the GAN term, whose adversarial gradient a CPU-sized batch cannot balance), tokens, world model, video decoder, both probes,
 // their evaluations, and optionally the fp16 copies for models/. Each stage is this binary run as a child process
 // with its own progress bar; every stage resumes from its checkpoint and a finished stage is skipped, so an
 // interrupted recipe continues where it stopped.
@@ -41,14 +41,13 @@ void register_train_all(CLI::App& app) {
   auto swerve = std::make_shared<double>(0.035);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
-  // Steps of each stage: the totals the shipped models were trained for (MODEL_CARD.md, "Recipe"), each stage as
-  // one run.
+  // Steps of each stage, each stage one run.
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
         probe_scene = 2500, probe_dynamics = 4000;
   };
   auto st = std::make_shared<Steps>();
-  cmd->add_option("--episodes", *episodes, "procedural episodes to render (MODEL_CARD.md recipe: 160)");
+  cmd->add_option("--episodes", *episodes, "procedural episodes to render");
   cmd->add_option("--seconds", *seconds, "seconds per episode (recipe: 30)");
   cmd->add_option("--wander-episodes", *wander_episodes,
                   "further episodes whose driver wanders in its lane (recipe: 80; docs/synth.md: without them the "
@@ -122,7 +121,7 @@ void register_train_all(CLI::App& app) {
         {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
          first_phase},
         // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
-        // then copy like real video (MODEL_CARD.md, "Copy calibration").
+        // then copy from frame to frame as often as the real drives do.
         {"world-calibrate",
          with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--without-meta",
                "replay_of", "--out", world}),
@@ -144,7 +143,7 @@ void register_train_all(CLI::App& app) {
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
     if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
     // The decoder alone, encoder and codebook frozen, grown by two full-resolution and two token-grid blocks and
-    // averaged over its steps (MODEL_CARD.md): the blocks start as identities and learn what the fine-tuned decoder
+    // averaged over its steps: the blocks start as identities and learn what the fine-tuned decoder
     // still misses, and every frame keeps the codes of tokenizer-ft. (The config defaults stay 0 so that weights
     // saved before these keys existed load as saved.)
     if (st->refine > 0)

@@ -312,10 +312,7 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
                                    {"items", {{{"label", "scene"}, {"path", "videos/unconditional.gif"}}}}}}}});
   sections.push_back({{"title", "Decoders"},
                       {"text", fmt::format("The first future through the video diffusion decoder ({:.0f} s on this "
-                                           "machine) and through the tokenizer's frame-by-frame decoder. The shipped "
-                                           "video decoder is briefly trained on a CPU: its frames are still a little "
-                                           "noisier than the tokenizer decoder's (models/MODEL_CARD.md has the "
-                                           "numbers).",
+                                           "machine) and through the tokenizer's frame-by-frame decoder.",
                                            dec_seconds)},
                       {"videos", {{{"caption", "video decoder | tokenizer decoder"}, {"items", dec_items}}}}});
   DemoResult res;

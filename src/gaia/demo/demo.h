@@ -21,7 +21,7 @@ struct DemoOptions {
   int frames = 10;               // frames generated per rollout (6.25 Hz)
   int ddim_steps = 10;           // video decoder; §5.2 uses 50, fewer keep the demo short
   double fps = 12.5;             // the video decoder's output rate: 6.25, 12.5 or 25 Hz
-  double text_guidance = 8.0;    // §5.1 guidance scale on the text prompts (docs/evaluation.md, "Text control")
+  double text_guidance = 8.0;    // §5.1 guidance scale on the text prompts, constant over the frames
   double action_guidance = 16.0; // guidance on the steering commands, against the mirrored command (0 = off)
   uint64_t seed = 0;
   std::string device = "cpu";

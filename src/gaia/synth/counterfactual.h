@@ -5,8 +5,7 @@
 //
 // Why: a lane-keeping driver never turns hard on a straight road, so a world model trained on its drives has
 // seen few strong turns from the states a video prompt shows, and cannot tell a commanded strong right turn from
-// a left one (docs/evaluation.md, "Where the strong right turn is lost"). The procedural world can show it what
-// the command does from exactly those states. The paper's real data has no such counterfactuals; this is the
+// a left one. The procedural world can show it what the command does from exactly those states. The paper's real data has no such counterfactuals; this is the
 // synthetic world's advantage, used for training only on the training split.
 #include <cstdint>
 #include <functional>
@@ -20,9 +19,9 @@ namespace gaia::synth {
 
 struct CounterfactualOptions {
   int per_episode = 4;           // replays of each source episode, each from its own random start
-  double lead_seconds = 1.5;     // recorded driving before the command (gaia eval's prompts: 3 frames, 0.48 s)
-  double hold_seconds = 2.0;     // the command held (gaia eval's rollouts: 5 frames, 0.8 s)
-  double max_curvature = 0.045;  // 1/m; drawn uniformly in [-max, max] (gaia eval commands up to 0.04)
+  double lead_seconds = 1.5;     // recorded driving before the command (longer than gaia eval's prompts)
+  double hold_seconds = 2.0;     // the command held (longer than gaia eval's rollouts)
+  double max_curvature = 0.045;  // 1/m; drawn uniformly in [-max, max] (beyond gaia eval's strongest commands)
   double min_speed = 3.0;        // the command keeps the recorded speed at its start, at least this (m/s; as gaia eval)
   uint64_t seed = 0;
 };
