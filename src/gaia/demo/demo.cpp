@@ -271,6 +271,9 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   if (!vp.continuation.empty()) futures_items.push_back({{"label", "real"}, {"path", "videos/real.gif"}});
   nlohmann::json steer_items = {{{"label", "generated"}, {"path", "videos/steer_generated.gif"}}};
   if (!truth.empty()) steer_items.push_back({{"label", "ground truth"}, {"path", "videos/steer_truth.gif"}});
+  nlohmann::json steer_metrics = readback;  // the steering part of the read-back
+  steer_metrics.erase("text");
+  steer_metrics.erase("text_guidance_scale");
   nlohmann::json sections = nlohmann::json::array();
   sections.push_back({{"title", "Video prompt and three futures"},
                       {"text", fmt::format("A {}-frame prompt from a drive the models never saw (outlined), then {} "
@@ -288,11 +291,7 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
                                            o.action_guidance)},
                       {"videos", {{{"caption", truth.empty() ? "world model" : "world model | counterfactual replay"},
                                    {"items", steer_items}}}},
-                      {"metrics", {{"steer_left_curvature_per_km", readback["steer_left_curvature_per_km"]},
-                                   {"steer_right_curvature_per_km", readback["steer_right_curvature_per_km"]},
-                                   {"steer_guidance_scale", o.action_guidance},
-                                   {"commanded_left_per_km", 10.0},
-                                   {"commanded_right_per_km", -10.0}}},
+                      {"metrics", steer_metrics},
                       {"commands", {cmdline}}});
   nlohmann::json text_metrics = nlohmann::json::object();
   for (const auto& t : texts) text_metrics[t.prompt + " read as " + t.read_as] = readback["text"][t.prompt]["share_as_prompted"];
