@@ -175,10 +175,15 @@ TEST(Config, EveryKeyHasARoleAndTheSamplingKeysComeFromIt) {
   Config c;
   for (const auto& f : c.fields()) {
     const auto section = f.key.substr(0, f.key.find('.'));
-    if (section == "tokenizer" || section == "world" || section == "decoder")
+    if (section == "tokenizer" || section == "world" || section == "decoder") {
       EXPECT_TRUE(f.role == ConfigRole::Architecture || f.role == ConfigRole::Training || f.role == ConfigRole::Sampling)
           << f.key;
-    if (section == "data") EXPECT_EQ(f.role, ConfigRole::Data) << f.key;
-    if (section == "run" || section == "name") EXPECT_EQ(f.role, ConfigRole::Run) << f.key;
+    }
+    if (section == "data") {
+      EXPECT_EQ(f.role, ConfigRole::Data) << f.key;
+    }
+    if (section == "run" || section == "name") {
+      EXPECT_EQ(f.role, ConfigRole::Run) << f.key;
+    }
   }
 }
