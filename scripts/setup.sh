@@ -8,9 +8,11 @@ PKGS=(
   libopenblas0-pthread         # fast BLAS for LibTorch's matrix products (the default reference BLAS is ~10x slower)
   libopencv-dev                # image / video I/O (FFmpeg backend)
   ffmpeg                       # video codecs used by OpenCV's FFmpeg backend
+  libavformat-dev              # a container's presented duration (cut clips hold more packets than they show)
   libcli11-dev                 # command-line parsing
   libyaml-cpp-dev              # configs
   nlohmann-json3-dev           # safetensors headers, JSONL metrics
+  libpugixml-dev               # GPX tracks
   libfmt-dev libspdlog-dev     # formatting and logging
   libgtest-dev libgmock-dev libbenchmark-dev
   liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)

@@ -49,6 +49,9 @@ std::string row_error(const test::TempDir& dir, const std::string& row) {
 
 bool has(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
 
+// The app at small()'s frame size: a dataset holds one size.
+const std::string kSmall = " --set data.height=24 --set data.width=32";
+
 IngestOptions small() {
   IngestOptions o;
   o.height = 24;
@@ -203,7 +206,7 @@ TEST(DataHardeningCli, IngestGapsGiveNaNAtExactFramesAndLowCoverageWarns) {
   EXPECT_TRUE(f.warnings.empty());
 
   // The app prints the warning as one "gaia: warning:" line and still succeeds.
-  auto run = test::run_gaia("ingest " + q(video) + " --signals " + q(dir / "sig.csv") + " --id cli --out " +
+  auto run = test::run_gaia("ingest " + q(video) + kSmall + " --signals " + q(dir / "sig.csv") + " --id cli --out " +
                             q(dir / "ds"));
   EXPECT_EQ(run.status, 0) << run.output;
   auto lines = said(run.output);
@@ -338,10 +341,10 @@ TEST(DataHardeningCli, TruncatedVideoFailsUnlessAllowPartial) {
   EXPECT_TRUE(fr.warnings.empty());
 
   // The app: one error line without the flag; with it, the episode and one warning line.
-  auto bad = test::run_gaia("ingest " + q(video) + " --id cli --out " + q(dir / "ds"));
+  auto bad = test::run_gaia("ingest " + q(video) + kSmall + " --id cli --out " + q(dir / "ds"));
   expect_one_error(bad, fmt::format("{}: decoded {} of 100 frames", video.string(), kept));
   EXPECT_TRUE(has(bad.output, "--allow-partial keeps the")) << bad.output;
-  auto ok = test::run_gaia("ingest " + q(video) + " --id cli --allow-partial --out " + q(dir / "ds"));
+  auto ok = test::run_gaia("ingest " + q(video) + kSmall + " --id cli --allow-partial --out " + q(dir / "ds"));
   EXPECT_EQ(ok.status, 0) << ok.output;
   auto lines = said(ok.output);
   ASSERT_EQ(lines.size(), 1u) << ok.output;

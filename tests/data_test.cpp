@@ -209,6 +209,14 @@ TEST(Ingest, RealClipsFromSharedData) {
   for (int i = 1; i < 30; ++i) EXPECT_NEAR(ep.time_s(i) - ep.time_s(i - 1), 0.04, 2e-3);
   cv::Scalar mean = cv::mean(ep.frame_bgr(10));
   EXPECT_GT(mean[0] + mean[1] + mean[2], 60);  // a real, non-black picture
+  // The whole clip: its MP4 holds 116 packets but presents 100 frames (an edit list cuts the first 0.64 s), which
+  // is not a truncation.
+  IngestOptions whole;
+  whole.id = "whole";
+  const auto w = ingest_video(real / "highway-sunny-720p25.mp4", dir / "ds", whole);
+  EXPECT_EQ(w.meta.num_frames, 100);
+  EXPECT_EQ(w.container_frames, 100);
+  EXPECT_TRUE(w.warnings.empty());
 
   // 29.97 fps MPEG-4: timestamps follow the container's rate.
   EpisodeMeta n = ingest_video(real / "night-rural-1080p30.mp4", dir / "ds", [&] { auto p = o; p.max_frames = 31; return p; }()).meta;

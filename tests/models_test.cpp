@@ -106,6 +106,8 @@ TEST(ShippedModelsSlow, TokenizerReconstructsFreshFrames) {
   EXPECT_GE(psnr, 20.0);
   auto used = std::get<0>(at::_unique(ids.flatten())).numel();
   EXPECT_GE(used, 100) << "codes used on " << frames.size() << " frames";
+  // Nothing to encode is one line, not LibTorch's "cat expects a non-empty TensorList".
+  EXPECT_EQ(test::error_of([&] { tokenizer::encode_frames(tok, {}, torch::kCPU); }), "tokenizer: no frames to encode");
 }
 
 // The shipped video decoder on a fresh drive, decoded from its true tokens to 25 Hz with 5 DDIM steps: the

@@ -270,19 +270,20 @@ TEST(WorldData, TokenOutOfRangeIsAnErrorNamingTheFile) {
   EXPECT_NE(test::error_of([&] { TokenDataset ds3(root); }).find("no dataset.json"), std::string::npos);
 }
 
-TEST(WorldData, BareNpyIsOneEpisodeWithoutActionsOrText) {
+TEST(WorldData, BareNpyIsOneDriveSplitInTimeWithoutActionsOrText) {
   TokenDataset fx(test::source_dir() / "tests" / "fixtures" / "tokens_6x8x16_int16.npy");
   EXPECT_TRUE(fx.bare());
-  EXPECT_EQ(fx.size(), 1u);
-  EXPECT_EQ(fx.ids()[0], "tokens_6x8x16_int16");
-  EXPECT_EQ(fx.steps(0), 6);
+  // Its last tenth (rounded, at least one step kept for training) is held out.
+  EXPECT_EQ(fx.ids(), (std::vector<std::string>{"tokens_6x8x16_int16", "tokens_6x8x16_int16.held-out"}));
+  EXPECT_EQ(fx.steps(0), 5);
+  EXPECT_EQ(fx.steps(1), 1);
   EXPECT_EQ(fx.grid_h(), 8);
   EXPECT_EQ(fx.grid_w(), 16);
 
   test::TempDir dir;
   std::vector<int32_t> t;
-  for (int64_t i = 0; i < 5 * kN; ++i) t.push_back(static_cast<int32_t>(i % 11));  // max 10 -> K = 11
-  npy_write(dir / "z.npy", npy_make(DType::I32, {5, kH, kW}, t));
+  for (int64_t i = 0; i < 6 * kN; ++i) t.push_back(static_cast<int32_t>(i % 11));  // max 10 -> K = 11
+  npy_write(dir / "z.npy", npy_make(DType::I32, {6, kH, kW}, t));
   TokenDataset ds(dir / "z.npy");
   EXPECT_EQ(ds.codebook_size(), 11);
   EXPECT_FALSE(ds.has_captions());
@@ -291,7 +292,8 @@ TEST(WorldData, BareNpyIsOneEpisodeWithoutActionsOrText) {
   EXPECT_NE(err.find("z.npy"), std::string::npos) << err;
   auto split = ds.split();
   EXPECT_EQ(split.train, (std::vector<std::string>{"z"}));
-  EXPECT_TRUE(split.val_random.empty() && split.val_geofence.empty());
+  EXPECT_EQ(split.held_out(), (std::vector<std::string>{"z.held-out"}));
+  EXPECT_EQ(ds.episode(1)->tokens.front(), 5 * kN % 11);  // the held-out step is the file's last
   Vocab v = Vocab::build({"anything"}, 10);
   std::mt19937_64 rng(1);
   WorldBatch b = ds.make_batch(ds.windows({0}, 4, 1), &v, 2, ConditioningMix{}, rng);
@@ -300,7 +302,7 @@ TEST(WorldData, BareNpyIsOneEpisodeWithoutActionsOrText) {
   EXPECT_TRUE(torch::isnan(b.actions).all().item<bool>());
   EXPECT_FALSE(b.text_ids.defined());
   // Only [frames, h, w] arrays of integers are token arrays.
-  npy_write(dir / "flat.npy", npy_make(DType::I32, {30}, t));
+  npy_write(dir / "flat.npy", npy_make(DType::I32, {6 * kN}, t));
   EXPECT_NE(test::error_of([&] { TokenDataset(dir / "flat.npy"); }).find("[frames, h, w]"), std::string::npos);
 }
 
@@ -586,4 +588,13 @@ TEST(WorldEval, SteeringSensitivityBucketsFramesByTheTurnBeforeThem) {
   EXPECT_EQ(t.left.frames, 2);
   EXPECT_TRUE(std::isfinite(t.left.nats));
   EXPECT_GT(std::abs(t.left.mirrored_rise) + std::abs(t.right.mirrored_rise), 1e-4);
+}
+
+TEST(WorldData, DefaultSplitNeverHoldsOutEveryEpisode) {
+  test::TempDir dir;
+  // A draw that holds out everything (here forced by the fraction; with two drives it happens 1% of the time at
+  // 0.1): the first drive trains, with its mirror image, and the rest stay held out.
+  const auto s = data::load_or_default_split(dir.path, {"a", "a-mirror", "b"}, 0.999999, 0);
+  EXPECT_EQ(s.train, (std::vector<std::string>{"a", "a-mirror"}));
+  EXPECT_EQ(s.held_out(), (std::vector<std::string>{"b"}));
 }

@@ -1,4 +1,5 @@
-// gaia data info|stats|split: look at a dataset, its balancing, and its geofenced validation split.
+// gaia data info|stats|split|motion: look at a dataset, its balancing and its geofenced validation split; estimate
+// ego-motion from the frames of episodes without signals.
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -10,6 +11,8 @@
 #include "gaia/data/balance.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/geofence.h"
+#include "gaia/data/motion.h"
+#include "gaia/core/progress.h"
 #include "gaia/eval/svg_plot.h"
 
 namespace gaia::app {
@@ -144,6 +147,87 @@ void register_data(CLI::App& app) {
       write_file_atomic(out, s.to_json().dump(2) + "\n");
       std::printf("train %zu, validation %zu inside geofences + %zu random -> %s\n", s.train.size(),
                   s.val_geofence.size(), s.val_random.size(), out.c_str());
+    });
+  }
+
+  {
+    auto* cmd = data_cmd->add_subcommand(
+        "motion", "estimate speed and curvature from the video (visual odometry) for episodes without signals; "
+                  "--compare scores the estimate against the signals episodes have");
+    auto flags = std::make_shared<SharedFlags>();
+    auto root = std::make_shared<std::string>();
+    auto only = std::make_shared<std::vector<std::string>>();
+    auto compare = std::make_shared<bool>(false), replace = std::make_shared<bool>(false);
+    auto mo = std::make_shared<data::MotionOptions>();
+    cmd->add_option("DATASET", *root, "dataset directory")->required();
+    cmd->add_option("--episodes", *only, "only these episode ids (comma-separated)")->delimiter(',');
+    cmd->add_flag("--compare", *compare, "write nothing: score the estimate against each episode's own signals "
+                  "(median speed error, curvature sign, yaw rate) and print the figures");
+    cmd->add_flag("--replace", *replace, "also replace signals that were measured (csv, gps, kitti-oxts, synth)");
+    add_motion_flags(cmd, mo.get());
+    add_shared_flags(cmd, flags.get(), "with --compare: a JSON file for the figures (optional)");
+    cmd->callback([=] {
+      apply_threads(resolve_config(*flags));
+      if (*compare && *replace) fail("--compare writes nothing; it cannot --replace");
+      data::Dataset ds(*root);
+      std::vector<size_t> eps = only->empty() ? all_episodes(ds) : data::episode_indices(ds, *only);
+      nlohmann::json report = nlohmann::json::array();
+      std::vector<double> est_v, est_k, ref_v, ref_k;
+      double ms = 0;
+      int done = 0, skipped = 0;
+      for (size_t e : eps) {
+        data::Episode ep = ds.episode(e);
+        const auto& m = ep.meta();
+        const bool measured = !m.signals_source.empty() && m.signals_source != "estimated";
+        if (!*compare && measured && !*replace) {
+          std::printf("%s: keeps its %s signals (--replace to estimate anyway)\n", m.id.c_str(), m.signals_source.c_str());
+          ++skipped;
+          continue;
+        }
+        if (*compare && !measured) {
+          std::printf("%s: no measured signals to compare with\n", m.id.c_str());
+          ++skipped;
+          continue;
+        }
+        ProgressBar bar(ep.size(), m.id);
+        const auto est = data::estimate_episode_motion(ep, {}, *mo, [&](int64_t d, int64_t) { bar.update(d); });
+        bar.finish();
+        ms += est.ms_per_frame;
+        ++done;
+        if (*compare) {
+          std::vector<double> v(ep.speeds().begin(), ep.speeds().end()), k(ep.curvatures().begin(), ep.curvatures().end());
+          const auto g = data::compare_motion(est.speed, est.curvature, v, k);
+          std::printf("%s (%s): %s; %.1f ms a frame\n", m.id.c_str(), m.signals_source.c_str(), g.summary().c_str(),
+                      est.ms_per_frame);
+          report.push_back({{"episode", m.id}, {"reference", m.signals_source}, {"frames", g.frames},
+                            {"median_speed_rel_error", g.median_speed_rel_error},
+                            {"curvature_frames", g.curvature_frames},
+                            {"curvature_sign_agreement", g.curvature_sign_agreement},
+                            {"yaw_rate_mae", g.yaw_rate_mae}, {"ms_per_frame", est.ms_per_frame}});
+          est_v.insert(est_v.end(), est.speed.begin(), est.speed.end());
+          est_k.insert(est_k.end(), est.curvature.begin(), est.curvature.end());
+          ref_v.insert(ref_v.end(), v.begin(), v.end());
+          ref_k.insert(ref_k.end(), k.begin(), k.end());
+        } else {
+          data::write_estimated_signals(ep, est);
+          std::printf("%s: estimated speed on %lld of %lld frames, curvature on %lld (%.1f ms a frame)\n", m.id.c_str(),
+                      (long long)est.frames_with_speed(), (long long)ep.size(), (long long)est.frames_with_curvature(),
+                      est.ms_per_frame);
+        }
+      }
+      if (*compare && done > 0) {
+        const auto g = data::compare_motion(est_v, est_k, ref_v, ref_k);
+        std::printf("all %d episodes: %s; %.1f ms a frame\n", done, g.summary().c_str(), ms / done);
+        if (!flags->out.empty()) {
+          nlohmann::json j{{"episodes", report},
+                           {"all", {{"frames", g.frames}, {"median_speed_rel_error", g.median_speed_rel_error},
+                                    {"curvature_frames", g.curvature_frames},
+                                    {"curvature_sign_agreement", g.curvature_sign_agreement},
+                                    {"yaw_rate_mae", g.yaw_rate_mae}, {"ms_per_frame", ms / done}}}};
+          write_file_atomic(flags->out, j.dump(2) + "\n");
+        }
+      }
+      if (done == 0) fail("{}: no episode to {} ({} skipped)", *root, *compare ? "compare" : "estimate", skipped);
     });
   }
 }

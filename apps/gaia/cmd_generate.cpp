@@ -15,6 +15,7 @@
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
+#include "gaia/world/token_file.h"
 #include "gaia/world/rollout.h"
 #include "gaia/world/token_dataset.h"
 
@@ -28,6 +29,7 @@ struct GenerateFlags {
   std::string sampling, token_schedule = "constant", frame_schedule = "constant";
   int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0, window_stride = 1;
   double speed = -1, top_p = 0.9, temperature = -1, guidance = 0;
+  TokenFormatFlags format;  // TOKENS from another tokenizer
 };
 
 // Steering presets (curvature in 1/m, + = left): a gentle bend (~100 m radius) and a sharp one (~30 m).
@@ -46,7 +48,9 @@ void register_generate(CLI::App& app) {
   auto* cmd = app.add_subcommand("generate", "roll out futures with the world model (video/action/text prompts)");
   auto flags = std::make_shared<SharedFlags>();
   auto g = std::make_shared<GenerateFlags>();
-  auto* tokens_opt = cmd->add_option("TOKENS", g->tokens, "video prompt from this token dataset (with --episode; none: no video prompt)");
+  auto* tokens_opt = cmd->add_option("TOKENS", g->tokens, "video prompt from this token dataset or token file (with "
+                                     "--episode; none: no video prompt)");
+  add_token_format_flags(cmd, &g->format);
   add_weights_flag(cmd, Weights::World, &g->world)->required();
   add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes a preview video, tokenizes --video");
   auto old_tokens = add_old_spelling(cmd, "--tokens", "the positional TOKENS");
@@ -110,7 +114,7 @@ void register_generate(CLI::App& app) {
       emerging::check_tokenizer_fits(info, g->world, tok, g->tokenizer);  // before anything is written
     }
     if (!g->tokens.empty()) {
-      world::TokenDataset ds(g->tokens, info.K);
+      world::TokenDataset ds(g->tokens, token_format(g->format, run, false, &info));
       if (ds.grid_h() != info.grid_h || ds.grid_w() != info.grid_w)
         fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g->tokens, ds.grid_h(), ds.grid_w(), g->world,
              info.grid_h, info.grid_w);
@@ -148,6 +152,10 @@ void register_generate(CLI::App& app) {
     double last_speed = 8.0;  // m/s when neither --speed nor a prompt says
     if (P > 0 && prompt_actions.defined() && !std::isnan(prompt_actions[P - 1][0].item<float>()))
       last_speed = prompt_actions[P - 1][0].item<float>() * world::kSpeedScale;
+    if ((!g->actions_csv.empty() || g->steer != "none" || g->speed >= 0) && info.action_share == 0)
+      fail("{}: this world model never saw an action (trained on drives without speed or curvature), so --steer, "
+           "--speed and --actions would do nothing; train on drives with signals (or gaia ingest --motion video)",
+           g->world);
     if (!g->actions_csv.empty()) {
       auto rows = synth::read_actions_csv(g->actions_csv);
       if (int64_t(rows.size()) != F)

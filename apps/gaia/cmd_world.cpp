@@ -1,4 +1,5 @@
-// gaia world train|eval|calibrate: the world model of §2.3 on a token dataset (gaia tokenize, or a bare tokens .npy).
+// gaia world train|eval|calibrate: the world model of §2.3 on a token dataset (gaia tokenize, or other tokenizers'
+// token files).
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
@@ -11,6 +12,7 @@
 #include "gaia/world/evaluate.h"
 #include "gaia/world/world_eval.h"
 #include "gaia/world/io.h"
+#include "gaia/world/token_file.h"
 #include "gaia/world/trainer.h"
 
 namespace gaia::app {
@@ -41,7 +43,10 @@ void register_world(CLI::App& app) {
     auto flags = std::make_shared<SharedFlags>();
     auto o = std::make_shared<world::WorldTrainOptions>();
     auto tokens = std::make_shared<std::string>();
-    cmd->add_option("TOKENS", *tokens, "token dataset (gaia tokenize) or a tokens .npy [frames, h, w]")->required();
+    auto format = std::make_shared<TokenFormatFlags>();
+    cmd->add_option("TOKENS", *tokens, "token dataset (gaia tokenize), or another tokenizer's token file or directory "
+                    "of them (.npy / .safetensors; see --grid)")->required();
+    add_token_format_flags(cmd, format.get());
     cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)")->check(number_in({1, 1e9}));
     cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
@@ -66,6 +71,7 @@ void register_world(CLI::App& app) {
       if (flags->out.empty()) fail("gaia world train: --out RUN_DIR is required");
       world::WorldTrainOptions opt = *o;
       opt.tokens = *tokens;
+      opt.format = token_format(*format, c, false);
       opt.out = flags->out;
       std::unique_ptr<ProgressBar> bar;
       auto r = world::train_world(
@@ -95,7 +101,9 @@ void register_world(CLI::App& app) {
     auto max_windows = std::make_shared<size_t>(256);
     auto sweep = std::make_shared<std::vector<int>>();
     auto sweep_windows = std::make_shared<size_t>(64);
-    cmd->add_option("TOKENS", *tokens, "token dataset (its validation episodes are scored)")->required();
+    auto format = std::make_shared<TokenFormatFlags>();
+    cmd->add_option("TOKENS", *tokens, "token dataset or token files (their validation episodes are scored)")->required();
+    add_token_format_flags(cmd, format.get());
     add_weights_flag(cmd, Weights::World, weights.get())->required();
     cmd->add_option("--max-windows", *max_windows, "held-out windows of T steps to score");
     cmd->add_option("--top-k-sweep", *sweep,
@@ -109,7 +117,7 @@ void register_world(CLI::App& app) {
       apply_threads(run);
       world::WorldInfo info;
       auto model = load_world_for(*flags, run, *weights, &info);
-      world::TokenDataset ds(*tokens, info.K);
+      world::TokenDataset ds(*tokens, token_format(*format, run, false, &info));
       check_tokens(ds, info, *tokens);
       world::WorldEvalOptions eo;
       eo.max_windows = *max_windows;
@@ -135,8 +143,10 @@ void register_world(CLI::App& app) {
     auto flags = std::make_shared<SharedFlags>();
     auto tokens = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     auto max_windows = std::make_shared<size_t>(256);
-    cmd->add_option("TOKENS", *tokens, "token dataset (its training episodes are used; all episodes if none is held out)")
-        ->required();
+    auto format = std::make_shared<TokenFormatFlags>();
+    cmd->add_option("TOKENS", *tokens, "token dataset or token files (their training episodes are used; all episodes "
+                    "if none is held out)")->required();
+    add_token_format_flags(cmd, format.get());
     add_weights_flag(cmd, Weights::World, weights.get())->required();
     cmd->add_option("--max-windows", *max_windows, "training windows of T steps, evenly spaced");
     auto without = std::make_shared<std::vector<std::string>>();
@@ -151,7 +161,7 @@ void register_world(CLI::App& app) {
       if (*max_windows < 1) fail("--max-windows must be >= 1");
       world::WorldInfo info;
       auto model = load_world_for(*flags, run, *weights, &info);
-      world::TokenDataset ds(*tokens, info.K);
+      world::TokenDataset ds(*tokens, token_format(*format, run, false, &info));
       check_tokens(ds, info, *tokens);
       auto ids = ds.split(0.1, info.config.run.seed).train;
       if (ids.empty()) ids = ds.ids();

@@ -12,7 +12,10 @@
 #include <opencv2/core.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/data/motion.h"
 #include "gaia/torch/tensor_io.h"
+#include "gaia/world/io.h"
+#include "gaia/world/token_file.h"
 
 namespace gaia::app {
 
@@ -100,6 +103,49 @@ void apply_sampling_sets(const SharedFlags& f, const std::string& section, const
                                  : fmt::format("here only {} can be set", fmt::join(sampling_keys, ", ")));
   }
   model_cfg.validate();
+}
+
+void add_motion_flags(CLI::App* cmd, data::MotionOptions* m) {
+  cmd->add_option("--camera-height", m->camera_height, "camera height above the road in metres, the scale of "
+                  "estimated speed (default 1.4, a dashcam behind the mirror; KITTI drives: 1.65)")
+      ->check(number_in({0.2, 10}))
+      ->each([m](const std::string&) { m->camera_height_stated = true; });
+  cmd->add_option("--hfov", m->hfov_deg, "the camera's horizontal field of view in degrees, when no calibration "
+                  "gives its focal length")->check(number_in({1, 179}))->capture_default_str();
+  cmd->add_option("--motion-smooth", m->smooth_s, "seconds of the median filter over the per-frame estimates")
+      ->check(number_in({0, 10}))->capture_default_str();
+}
+
+void add_token_format_flags(CLI::App* cmd, TokenFormatFlags* f) {
+  cmd->add_option("--grid", f->grid, "another tokenizer's token grid HxW, for [frames, h*w] arrays (e.g. 8x16)");
+  cmd->add_option("--codebook-size", f->codebook_size, "another tokenizer's codebook size K (default: the config's "
+                  "tokenizer.codebook_size, or the world model's)")->check(number_in({1, 1 << 24}));
+  cmd->add_option("--token-fps", f->token_fps, "frame rate of the token files (subsampled to the world model's "
+                  "data.world_fps; default: already at it)")->check(number_in({0.1, 1000}));
+  cmd->add_flag("--keep-rate", f->keep_rate, "with --token-fps: keep the files' own rate instead of subsampling");
+}
+
+world::TokenFormat token_format(const TokenFormatFlags& f, const Config& c, bool k_from_config,
+                                const world::WorldInfo* info) {
+  world::TokenFormat t;
+  if (!f.grid.empty()) t.set_grid(f.grid);
+  t.codebook_size = f.codebook_size;
+  t.rate_hz = f.token_fps;
+  t.keep_rate = f.keep_rate;
+  t.world_rate_hz = (info ? info->config : c).data.world_fps;
+  if (f.keep_rate && f.token_fps <= 0) fail("--keep-rate needs --token-fps (the files' own frame rate)");
+  if (info) {
+    if (t.grid_h > 0 && (t.grid_h != info->grid_h || t.grid_w != info->grid_w))
+      fail("--grid {}: the world model was trained on a {}x{} grid", f.grid, info->grid_h, info->grid_w);
+    if (t.codebook_size > 0 && t.codebook_size != info->K)
+      fail("--codebook-size {}: the world model was trained with K = {}", t.codebook_size, info->K);
+    t.grid_h = info->grid_h;
+    t.grid_w = info->grid_w;
+    t.codebook_size = info->K;
+  } else if (t.codebook_size == 0 && k_from_config) {
+    t.codebook_size = c.tokenizer.codebook_size;
+  }
+  return t;
 }
 
 CLI::Validator number_in(const Range& r) {

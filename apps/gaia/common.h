@@ -8,6 +8,15 @@
 
 #include "gaia/config.h"
 
+namespace gaia::data {
+struct MotionOptions;
+}  // namespace gaia::data
+
+namespace gaia::world {
+struct TokenFormat;
+struct WorldInfo;
+}  // namespace gaia::world
+
 namespace gaia::app {
 
 struct SharedFlags {
@@ -31,6 +40,23 @@ template <typename Path>  // std::string or fs::path
 CLI::Option* add_weights_flag(CLI::App* cmd, Weights which, Path* path, const std::string& use = "") {
   return cmd->add_option(weights_flag_name(which), *path, weights_flag_help(which, use));
 }
+
+// How to read token files of other tokenizers (world/token_file.h, docs/formats.md): --grid HxW, --codebook-size
+// K, --token-fps F, --keep-rate. Commands given world-model weights take the grid and K from them.
+struct TokenFormatFlags {
+  std::string grid;
+  long long codebook_size = 0;
+  double token_fps = 0;
+  bool keep_rate = false;
+};
+void add_token_format_flags(CLI::App* cmd, TokenFormatFlags* f);
+// The format for `c` (its world rate and, with no --codebook-size, its tokenizer.codebook_size when `k_from_config`);
+// with `info` (a trained world model) its grid and K, which stated flags must match.
+world::TokenFormat token_format(const TokenFormatFlags& f, const Config& c, bool k_from_config,
+                                const world::WorldInfo* info = nullptr);
+
+// --camera-height, --hfov, --motion-smooth: ego-motion from video (data/motion.h), for ingest and data motion.
+void add_motion_flags(CLI::App* cmd, data::MotionOptions* m);
 
 // An old spelling of an option kept for a release: hidden from --help, writing the same variable. The callback
 // copies it over (old_spelling_into) and says once on stderr which name to use instead.

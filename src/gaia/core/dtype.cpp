@@ -1,6 +1,8 @@
 #include "gaia/core/dtype.h"
 
 #include <cstring>
+#include <limits>
+#include <type_traits>
 
 #include <fmt/format.h>
 
@@ -10,9 +12,9 @@ namespace gaia {
 
 size_t dtype_size(DType t) {
   switch (t) {
-    case DType::F64: case DType::I64: return 8;
-    case DType::F32: case DType::I32: return 4;
-    case DType::F16: case DType::BF16: case DType::I16: return 2;
+    case DType::F64: case DType::I64: case DType::U64: return 8;
+    case DType::F32: case DType::I32: case DType::U32: return 4;
+    case DType::F16: case DType::BF16: case DType::I16: case DType::U16: return 2;
     case DType::I8: case DType::U8: case DType::BOOL: return 1;
   }
   return 0;
@@ -23,8 +25,40 @@ struct Name { DType t; const char* s; };
 constexpr Name kNames[] = {{DType::F64, "F64"}, {DType::F32, "F32"}, {DType::F16, "F16"},
                            {DType::BF16, "BF16"}, {DType::I64, "I64"}, {DType::I32, "I32"},
                            {DType::I16, "I16"}, {DType::I8, "I8"}, {DType::U8, "U8"},
+                           {DType::U16, "U16"}, {DType::U32, "U32"}, {DType::U64, "U64"},
                            {DType::BOOL, "BOOL"}};
+
+template <typename T> int64_t load(const uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof v);
+  if constexpr (std::is_same_v<T, uint64_t>)
+    return v > uint64_t(std::numeric_limits<int64_t>::max()) ? std::numeric_limits<int64_t>::max() : int64_t(v);
+  else
+    return static_cast<int64_t>(v);
+}
 }  // namespace
+
+bool is_integer(DType t) { return t != DType::F64 && t != DType::F32 && t != DType::F16 && t != DType::BF16; }
+
+std::vector<int64_t> integer_values(DType t, const uint8_t* data, size_t n) {
+  if (!is_integer(t)) fail("an array of {} is not an integer array", safetensors_name(t));
+  std::vector<int64_t> out(n);
+  const size_t s = dtype_size(t);
+  for (size_t i = 0; i < n; ++i) {
+    const uint8_t* p = data + i * s;
+    switch (t) {
+      case DType::I64: out[i] = load<int64_t>(p); break;
+      case DType::I32: out[i] = load<int32_t>(p); break;
+      case DType::I16: out[i] = load<int16_t>(p); break;
+      case DType::I8: out[i] = load<int8_t>(p); break;
+      case DType::U64: out[i] = load<uint64_t>(p); break;
+      case DType::U32: out[i] = load<uint32_t>(p); break;
+      case DType::U16: out[i] = load<uint16_t>(p); break;
+      default: out[i] = load<uint8_t>(p); break;  // U8, BOOL
+    }
+  }
+  return out;
+}
 
 std::string safetensors_name(DType t) {
   for (auto& n : kNames) if (n.t == t) return n.s;

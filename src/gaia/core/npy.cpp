@@ -20,6 +20,9 @@ std::string descr_of(DType t) {
     case DType::I16: return "<i2";
     case DType::I8: return "|i1";
     case DType::U8: return "|u1";
+    case DType::U16: return "<u2";
+    case DType::U32: return "<u4";
+    case DType::U64: return "<u8";
     case DType::BOOL: return "|b1";
     case DType::BF16: break;
   }
@@ -30,7 +33,7 @@ bool dtype_of(const std::string& d, DType* out) {
   static const std::pair<const char*, DType> table[] = {
       {"<f8", DType::F64}, {"<f4", DType::F32}, {"<f2", DType::F16}, {"<i8", DType::I64}, {"<i4", DType::I32},
       {"<i2", DType::I16}, {"|i1", DType::I8},  {"|u1", DType::U8},  {"|b1", DType::BOOL}, {"<u1", DType::U8},
-      {"<i1", DType::I8}};
+      {"<i1", DType::I8},  {"<u2", DType::U16}, {"<u4", DType::U32}, {"<u8", DType::U64}};
   for (auto& [s, t] : table)
     if (d == s) { *out = t; return true; }
   return false;
@@ -81,7 +84,7 @@ NpyArray npy_read(const fs::path& path) {
   const auto descr = header_value(header, "descr", '\'', '\'');
   if (!descr) fail("{}: .npy header has no descr", p);
   if (!dtype_of(*descr, &a.dtype))
-    fail("{}: unsupported .npy dtype '{}' (want int16/32/64, uint8, float32/64)", p, *descr);
+    fail("{}: unsupported .npy dtype '{}' (want an integer type, bool, float16/32/64)", p, *descr);
   const std::string order = header_value(header, "fortran_order", 0, 0).value_or("");
   if (order.rfind("True", 0) == 0) fail("{}: Fortran-order .npy arrays are not supported; save with C order", p);
   if (order.rfind("False", 0) != 0) fail("{}: .npy header has no fortran_order", p);
@@ -130,18 +133,8 @@ void npy_write(const fs::path& path, const NpyArray& a) {
 }
 
 std::vector<int64_t> NpyArray::to_int64() const {
-  std::vector<int64_t> out(static_cast<size_t>(size()));
-  for (size_t i = 0; i < out.size(); ++i) {
-    switch (dtype) {
-      case DType::I64: out[i] = as<int64_t>()[i]; break;
-      case DType::I32: out[i] = as<int32_t>()[i]; break;
-      case DType::I16: out[i] = as<int16_t>()[i]; break;
-      case DType::I8: out[i] = as<int8_t>()[i]; break;
-      case DType::U8: case DType::BOOL: out[i] = as<uint8_t>()[i]; break;
-      default: fail("npy: array of {} is not an integer array", safetensors_name(dtype));
-    }
-  }
-  return out;
+  if (!is_integer(dtype)) fail("npy: array of {} is not an integer array", safetensors_name(dtype));
+  return integer_values(dtype, bytes.data(), static_cast<size_t>(size()));
 }
 
 std::vector<double> NpyArray::to_double() const {

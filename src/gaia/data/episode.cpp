@@ -63,6 +63,7 @@ json EpisodeMeta::to_json() const {
             {"longitude", nan_to_null(longitude)},
             {"source", source},
             {"extra", extra}};
+  if (!signals_source.empty()) j["signals_source"] = signals_source;
   return j;
 }
 
@@ -82,6 +83,7 @@ EpisodeMeta EpisodeMeta::from_json(const json& j, const std::string& where) {
     m.latitude = null_to_nan(j.value("latitude", json(nullptr)));
     m.longitude = null_to_nan(j.value("longitude", json(nullptr)));
     m.source = j.value("source", "");
+    m.signals_source = j.value("signals_source", "");
     if (j.contains("extra")) m.extra = j.at("extra").get<std::map<std::string, std::string>>();
   } catch (const json::exception& e) {
     fail("{}: bad episode metadata ({})", where, e.what());
@@ -156,6 +158,16 @@ void EpisodeWriter::append(const FrameRecord& f) {
   if (!f.labels.is_null()) any_labels_ = true;
 }
 
+void EpisodeWriter::set_signals(const std::vector<float>& speed, const std::vector<float>& curvature,
+                                const std::vector<float>& confidence, const std::string& source) {
+  if (speed.size() != times_.size() || curvature.size() != times_.size() || confidence.size() != times_.size())
+    fail("episode {}: {} signal values for {} frames", meta_.id, speed.size(), times_.size());
+  speed_ = speed;
+  curvature_ = curvature;
+  confidence_ = confidence;
+  meta_.signals_source = source;
+}
+
 void EpisodeWriter::commit() {
   if (times_.empty()) fail("episode {}: no frames were written", meta_.id);
   std::fclose(frames_);
@@ -167,6 +179,7 @@ void EpisodeWriter::commit() {
   npy_write(d / "time_s.npy", npy_make(DType::F64, {n}, times_));
   npy_write(d / "speed.npy", npy_make(DType::F32, {n}, speed_));
   npy_write(d / "curvature.npy", npy_make(DType::F32, {n}, curvature_));
+  if (!confidence_.empty()) npy_write(d / "motion_confidence.npy", npy_make(DType::F32, {n}, confidence_));
   std::string caps;
   for (auto& c : captions_) caps += json(c).dump() + "\n";
   write_file_atomic(d / "captions.jsonl", caps);

@@ -42,6 +42,9 @@ struct EpisodeMeta {
   double latitude = std::numeric_limits<double>::quiet_NaN();
   double longitude = std::numeric_limits<double>::quiet_NaN();
   std::string source;             // e.g. the video path or "synth:seed=3"
+  // Where speed and curvature came from: "csv", "kitti-oxts", "gps", "estimated" (visual odometry), "synth"
+  // (the simulator's truth); "" = none or not recorded. Lets balancing and evaluation tell estimates apart.
+  std::string signals_source;
   std::map<std::string, std::string> extra;  // free-form --meta key=value pairs
   int64_t num_frames = 0;         // filled by the writer
 
@@ -79,6 +82,10 @@ class EpisodeWriter {
   int64_t frames_written() const { return static_cast<int64_t>(times_.size()); }
   void commit();  // throws if no frames were written
   const EpisodeMeta& meta() const { return meta_; }
+  // Replaces every frame's speed and curvature before commit (ego-motion estimated once all frames are seen),
+  // with a per-frame confidence in [0, 1] (motion_confidence.npy) and the new signals_source.
+  void set_signals(const std::vector<float>& speed, const std::vector<float>& curvature,
+                   const std::vector<float>& confidence, const std::string& source);
 
  private:
   fs::path dataset_;
@@ -89,7 +96,7 @@ class EpisodeWriter {
   int64_t offset_ = 0;
   std::vector<int64_t> offsets_{0};
   std::vector<double> times_;
-  std::vector<float> speed_, curvature_;
+  std::vector<float> speed_, curvature_, confidence_;
   std::vector<std::string> captions_;
   std::vector<nlohmann::json> labels_;
   bool any_labels_ = false;

@@ -104,6 +104,13 @@ Split load_or_default_split(const fs::path& root, const std::vector<std::string>
     s.val_random.push_back(s.train.back());
     s.train.pop_back();
   }
+  if (s.train.empty() && !s.val_random.empty()) {
+    // The draw held out every episode: the first drive trains (with its mirror images and replays, which go with it).
+    const std::string first = split_source_id(s.val_random.front());
+    std::vector<std::string> keep;
+    for (auto& id : s.val_random) (split_source_id(id) == first ? s.train : keep).push_back(id);
+    s.val_random = keep;
+  }
   return s;
 }
 

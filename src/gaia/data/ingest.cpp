@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "gaia/core/error.h"
+#include "gaia/data/gps.h"
+#include "gaia/data/kitti.h"
 #include "gaia/data/signals.h"
 #include "gaia/data/video_io.h"
 
@@ -48,42 +51,83 @@ std::string truncation(const fs::path& video, int64_t decoded, int64_t stated, i
   return fmt::format("{}: decoded {} of {} frames: the file is truncated or damaged", video.string(), decoded, stated);
 }
 
-}  // namespace
-
-IngestResult ingest_video(const fs::path& video, const fs::path& dataset, const IngestOptions& opt,
-                          const std::function<void(int64_t, int64_t)>& progress) {
-  check_fps(opt.fps);
-  VideoSource src(video, opt.fps);
+// Where an episode's signals come from: at most one source, read before any frame is written.
+struct SignalSource {
   Signals sig;
-  bool have_signals = !opt.signals.empty();
-  if (have_signals) sig = read_signals_csv(opt.signals);
-  EpisodeMeta meta;
-  meta.id = opt.id.empty() ? video.stem().string() : opt.id;
-  if (meta.id.empty()) meta.id = video.filename().string();
-  meta.fps = src.fps();
+  std::string file, kind;  // kind: EpisodeMeta::signals_source
+  bool present() const { return !kind.empty(); }
+};
+
+SignalSource signals_of(const IngestOptions& opt, double fps) {
+  if (int(!opt.signals.empty()) + int(!opt.gps.empty()) + int(!opt.poses.empty()) > 1)
+    fail("--signals, --gps and --poses: give one source of speed and curvature");
+  SignalSource s;
+  if (!opt.signals.empty()) {
+    s.sig = read_signals_csv(opt.signals);
+    s.file = opt.signals.string();
+    s.kind = "csv";
+  } else if (!opt.gps.empty()) {
+    if (!std::isfinite(opt.gps_offset)) fail("--gps-offset must be a finite number of seconds");
+    const GpsTrack t = read_gps_track(opt.gps);
+    s.sig = track_signals(t, t.fixes.front().t_s + opt.gps_offset);
+    s.file = opt.gps.string();
+    s.kind = "gps";
+  } else if (!opt.poses.empty()) {
+    s.sig = pose_signals(opt.poses, fps);
+    s.file = opt.poses.string();
+    s.kind = "poses";
+  }
+  return s;
+}
+
+// One dataset, one frame size: the world model and the tokenizer see every episode at the same size.
+void check_frame_size(const fs::path& dataset, int height, int width) {
+  if (!fs::exists(dataset / "dataset.json") || !fs::is_directory(dataset / "episodes")) return;
+  Dataset ds(dataset);
+  if (ds.size() == 0) return;
+  const EpisodeMeta m = ds.meta(0);
+  if (m.height != height || m.width != width)
+    fail("{}: its episodes are {}x{}, this config ingests at {}x{} (data.height x data.width); use the config the "
+         "dataset was made with, or another --out", dataset.string(), m.height, m.width, height, width);
+}
+
+// The shared body of every ingest: frames from `src` (at `times` when given, else the source's clock), signals
+// interpolated to each frame, written and committed as one episode.
+IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSource& sig, EpisodeMeta meta,
+                         const fs::path& dataset, const IngestOptions& opt, const std::vector<double>* times,
+                         const std::function<void(int64_t, int64_t)>& progress) {
+  check_frame_size(dataset, opt.height, opt.width);
   meta.height = opt.height;
   meta.width = opt.width;
   meta.frame_codec = opt.frame_codec;
-  meta.source = video.filename().string();
+  meta.signals_source = sig.kind;
   apply_meta(&meta, opt.meta);
   EpisodeWriter writer(dataset, meta, opt.overwrite);
   IngestResult res;
   res.container_frames = std::max<int64_t>(0, src.frame_count_hint());
+  std::unique_ptr<MotionEstimator> motion;
+  if (opt.motion_video) motion = std::make_unique<MotionEstimator>(opt.camera, opt.motion);
+  std::vector<float> measured_speed, measured_curvature;
   VideoFrame vf;
   double first_t = 0, last_t = 0;
   int64_t total = opt.max_frames > 0 ? std::min(opt.max_frames, src.frame_count_hint()) : src.frame_count_hint();
   while ((opt.max_frames <= 0 || writer.frames_written() < opt.max_frames) && src.next(&vf)) {
     FrameRecord r;
     r.bgr = resize_center_crop(vf.bgr, opt.height, opt.width);
-    r.time_s = vf.time_s;
-    if (have_signals) {
-      r.speed = static_cast<float>(sig.speed_at(vf.time_s));
-      r.curvature = static_cast<float>(sig.curvature_at(vf.time_s));
-      r.caption = sig.caption_at(vf.time_s);
+    r.time_s = times ? times->at(size_t(writer.frames_written())) : vf.time_s;
+    if (sig.present()) {
+      r.speed = static_cast<float>(sig.sig.speed_at(r.time_s));
+      r.curvature = static_cast<float>(sig.sig.curvature_at(r.time_s));
+      r.caption = sig.sig.caption_at(r.time_s);
       if (!std::isnan(r.speed)) ++res.frames_with_speed;
     }
-    if (writer.frames_written() == 0) first_t = vf.time_s;
-    last_t = vf.time_s;
+    if (writer.frames_written() == 0) first_t = r.time_s;
+    last_t = r.time_s;
+    if (motion) {
+      motion->add(vf.bgr, r.time_s);  // the recorded frame, before the resize
+      measured_speed.push_back(r.speed);
+      measured_curvature.push_back(r.curvature);
+    }
     writer.append(r);
     if (progress) progress(writer.frames_written(), std::max(total, writer.frames_written()));
   }
@@ -92,19 +136,86 @@ IngestResult ingest_video(const fs::path& video, const fs::path& dataset, const 
   std::string cut = truncation(video, n, res.container_frames, opt.max_frames);
   if (!cut.empty() && !opt.allow_partial) fail("{}; --allow-partial keeps the {}", cut, n);
   if (!cut.empty()) res.warnings.push_back(fmt::format("{}; kept the {} (--allow-partial)", cut, n));
-  if (have_signals) {
+  if (sig.present()) {
     res.signal_coverage = double(res.frames_with_speed) / double(n);
-    const std::string csv = opt.signals.string();
     if (res.frames_with_speed == 0)
-      fail("{}: gives none of the {} frames of {} a speed (signals span [{}, {}] s, the video [{}, {}] s)", csv, n,
-           video.string(), sig.time_s.front(), sig.time_s.back(), first_t, last_t);
+      fail("{}: gives none of the {} frames of {} a speed (signals span [{}, {}] s, the video [{}, {}] s)", sig.file, n,
+           video.string(), sig.sig.time_s.front(), sig.sig.time_s.back(), first_t, last_t);
     if (res.signal_coverage < kLowSignalCoverage)
-      res.warnings.push_back(fmt::format("{}: covers only {:.1f}% of the frames of {} ({} of {} got a speed)", csv,
+      res.warnings.push_back(fmt::format("{}: covers only {:.1f}% of the frames of {} ({} of {} got a speed)", sig.file,
                                          100 * res.signal_coverage, video.string(), res.frames_with_speed, n));
+  }
+  if (motion) {
+    const MotionEstimate m = motion->finish();
+    res.frames_estimated = m.frames_with_speed();
+    res.motion_ms_per_frame = m.ms_per_frame;
+    for (size_t i = 0; i < m.reason.size(); ++i)
+      if (!m.reason[i].empty()) ++res.motion_gaps[m.reason[i]];
+    const auto still = res.motion_gaps.find("standing still");
+    if (still != res.motion_gaps.end() && still->second == int64_t(m.reason.size()))
+      res.warnings.push_back(fmt::format("{}: the camera never moves (a parked car?): every frame reads as standing "
+                                         "still, so these frames teach no steering", video.string()));
+    if (sig.present()) {
+      const std::vector<double> vs(measured_speed.begin(), measured_speed.end()),
+          ks(measured_curvature.begin(), measured_curvature.end());
+      res.motion_agreement = compare_motion(m.speed, m.curvature, vs, ks).summary();
+    } else {
+      std::vector<float> v(m.speed.begin(), m.speed.end()), k(m.curvature.begin(), m.curvature.end()),
+          c(m.confidence.begin(), m.confidence.end());
+      writer.set_signals(v, k, c, "estimated");
+      if (res.frames_estimated == 0)
+        res.warnings.push_back(fmt::format("{}: the video gave no frame a speed estimate ({}); its actions stay "
+                                           "missing", video.string(), m.reason.empty() ? "" : m.reason.back()));
+    }
   }
   writer.commit();
   res.meta = writer.meta();
   return res;
+}
+
+}  // namespace
+
+IngestResult ingest_video(const fs::path& video, const fs::path& dataset, const IngestOptions& opt,
+                          const std::function<void(int64_t, int64_t)>& progress) {
+  check_fps(opt.fps);
+  VideoSource src(video, opt.fps);
+  const SignalSource sig = signals_of(opt, src.fps());
+  EpisodeMeta meta;
+  meta.id = opt.id.empty() ? video.stem().string() : opt.id;
+  if (meta.id.empty()) meta.id = video.filename().string();
+  meta.fps = src.fps();
+  meta.source = video.filename().string();
+  return ingest_from(src, video, sig, meta, dataset, opt, nullptr, progress);
+}
+
+IngestResult ingest_kitti(const fs::path& drive, const fs::path& dataset, const IngestOptions& opt,
+                          const std::function<void(int64_t, int64_t)>& progress) {
+  const KittiDrive d = read_kitti_drive(drive);
+  if (opt.fps > 0) fail("--fps: a KITTI drive's rate comes from its timestamps ({:.3g} Hz)", d.fps);
+  SignalSource sig = signals_of(opt, d.fps);
+  if (!sig.present() && d.has_oxts()) {
+    sig.sig = d.oxts;
+    sig.file = (drive / "oxts").string();
+    sig.kind = "kitti-oxts";
+  } else if (!sig.present() && !opt.motion_video) {
+    fail("{}: no oxts/ folder (KITTI's GPS/IMU record), so no speed or curvature; give --signals, --gps or "
+         "--motion video, or ingest {} as images with --fps", drive.string(), d.images.string());
+  }
+  IngestOptions o = opt;
+  if (d.focal_px > 0) o.camera = CameraIntrinsics{d.focal_px, d.cx, d.cy, d.image_width, d.image_height};
+  if (!o.motion.camera_height_stated) o.motion.camera_height = kKittiCameraHeight;
+  VideoSource src(d.images, d.fps);
+  EpisodeMeta meta;
+  fs::path name = drive;
+  if (name.filename().empty()) name = name.parent_path();  // "drive/" names the drive too
+  meta.id = opt.id.empty() ? name.filename().string() : opt.id;
+  meta.fps = d.fps;
+  meta.source = "kitti:" + name.filename().string();
+  if (d.has_oxts()) {
+    meta.latitude = d.latitude;
+    meta.longitude = d.longitude;
+  }
+  return ingest_from(src, d.images, sig, meta, dataset, o, &d.image_time_s, progress);
 }
 
 }  // namespace gaia::data

@@ -13,6 +13,10 @@
 
 #include "gaia/core/error.h"
 
+extern "C" {
+#include <libavformat/avformat.h>
+}
+
 namespace gaia::data {
 
 namespace {
@@ -20,6 +24,28 @@ bool is_image(const fs::path& p) {
   std::string e = p.extension().string();
   std::transform(e.begin(), e.end(), e.begin(), ::tolower);
   return e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".bmp";
+}
+
+// The frames an MP4/MOV presents: its video stream's duration from the header (edit lists applied, as players show
+// it) times the frame rate. A cut MP4 can hold more packets than it presents (nb_frames counts them all), so the
+// packet count alone would read a cut clip as truncated. Other containers (AVI, TS) estimate their duration from
+// the data that is there, which would hide a truncation: 0 for them, as when no duration is stated.
+int64_t presented_frames(const fs::path& path, double fps) {
+  AVFormatContext* ctx = nullptr;
+  if (avformat_open_input(&ctx, path.c_str(), nullptr, nullptr) != 0) return 0;
+  int64_t n = 0;
+  const bool mov = ctx->iformat && std::strstr(ctx->iformat->name, "mp4") != nullptr;  // "mov,mp4,m4a,3gp,3g2,mj2"
+  if (mov && avformat_find_stream_info(ctx, nullptr) >= 0 && ctx->duration_estimation_method == AVFMT_DURATION_FROM_STREAM) {
+    const int s = av_find_best_stream(ctx, AVMEDIA_TYPE_VIDEO, -1, -1, nullptr, 0);
+    double seconds = 0;
+    if (s >= 0 && ctx->streams[s]->duration > 0)
+      seconds = double(ctx->streams[s]->duration) * av_q2d(ctx->streams[s]->time_base);
+    else if (ctx->duration > 0)
+      seconds = double(ctx->duration) / AV_TIME_BASE;
+    if (seconds > 0 && fps > 0) n = std::llround(seconds * fps);
+  }
+  avformat_close_input(&ctx);
+  return n;
 }
 
 cv::Mat to_bgr(const cv::Mat& m) {
@@ -54,6 +80,8 @@ VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path
   // Streams without an index report 0, a negative or a garbage count: treat anything implausible as "none".
   const double count = cap_->get(cv::CAP_PROP_FRAME_COUNT);
   count_hint_ = std::isfinite(count) && count > 0 && count < 1e12 ? static_cast<int64_t>(count) : 0;
+  const int64_t presented = presented_frames(path, fps);  // the container's own rate, whatever --fps says
+  if (presented > 0 && count_hint_ > 0 && presented < count_hint_) count_hint_ = presented;
   width_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_WIDTH));
   height_ = static_cast<int>(cap_->get(cv::CAP_PROP_FRAME_HEIGHT));
 }

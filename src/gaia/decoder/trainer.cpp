@@ -26,6 +26,7 @@ namespace F = torch::nn::functional;
 
 Clips load_clips(const std::vector<std::unique_ptr<data::Episode>>& episodes, const std::vector<ClipRef>& refs,
                  tokenizer::ImageTokenizer& tok, bool with_cond, const torch::Device& dev) {
+  if (refs.empty() || refs.front().frames.empty()) fail("decoder: no clip frames to load");
   torch::NoGradGuard ng;
   std::vector<torch::Tensor> xs;
   for (const auto& r : refs)

@@ -72,6 +72,7 @@ data::EpisodeMeta Simulator::meta() const {
   m.latitude = d.lat + rad * std::sin(a);
   m.longitude = d.lon + rad * std::cos(a) / std::cos(d.lat * kPi / 180);
   m.source = fmt::format("synth:seed={},episode={}", s.seed, s.index);
+  m.signals_source = "synth";  // the simulator's own speed and curvature
   m.extra["synth_version"] = kSynthVersion;
   m.extra["synth_seed"] = std::to_string(s.seed);
   m.extra["synth_index"] = std::to_string(s.index);

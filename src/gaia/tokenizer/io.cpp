@@ -37,6 +37,7 @@ ImageTokenizer load_tokenizer(const fs::path& path, const torch::Device& device,
 }
 
 torch::Tensor encode_frames(ImageTokenizer& t, const std::vector<cv::Mat>& frames, const torch::Device& device) {
+  if (frames.empty()) fail("tokenizer: no frames to encode");
   torch::NoGradGuard ng;
   std::vector<torch::Tensor> out;
   const size_t B = 16;

@@ -134,6 +134,7 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
 }
 
 cv::Mat pca_sheet(ImageTokenizer& t, const std::vector<cv::Mat>& frames, const torch::Device& device) {
+  if (frames.empty()) fail("tokenizer pca: no frames");
   torch::NoGradGuard ng;
   std::vector<torch::Tensor> xs;
   for (auto& f : frames) xs.push_back(image_to_tensor(f.data, f.rows, f.cols));

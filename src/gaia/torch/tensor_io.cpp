@@ -50,8 +50,9 @@ torch::Dtype to_torch(DType t) {
     case DType::I8: return torch::kInt8;
     case DType::U8: return torch::kUInt8;
     case DType::BOOL: return torch::kBool;
+    case DType::U16: case DType::U32: case DType::U64: break;
   }
-  return torch::kFloat32;
+  fail("{} tensors have no LibTorch dtype", safetensors_name(t));
 }
 
 DType from_torch(torch::Dtype t) {

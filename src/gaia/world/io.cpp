@@ -9,9 +9,10 @@ namespace gaia::world {
 void save_world(WorldModel& m, const WorldInfo& info, const fs::path& path) {
   Config c = info.config;
   nlohmann::json grid = {{"h", info.grid_h}, {"w", info.grid_w}, {"K", info.K}};
-  save_module(*m, path,
-              {{"gaia.component", "world"}, {"gaia.config", c.to_yaml()}, {"gaia.grid", grid.dump()},
-               {"gaia.vocab", info.vocab.to_json().dump()}});
+  std::map<std::string, std::string> md{{"gaia.component", "world"}, {"gaia.config", c.to_yaml()},
+                                        {"gaia.grid", grid.dump()}, {"gaia.vocab", info.vocab.to_json().dump()}};
+  if (info.action_share >= 0) md["gaia.action_share"] = fmt::format("{}", info.action_share);
+  save_module(*m, path, md);
 }
 
 WorldModel load_world(const fs::path& path, const torch::Device& device, WorldInfo* info_out) {
@@ -29,10 +30,17 @@ WorldModel load_world(const fs::path& path, const torch::Device& device, WorldIn
       info.grid_w = g.at("w").get<int64_t>();
       info.K = g.at("K").get<int64_t>();
       info.vocab = text::Vocab::from_json(nlohmann::json::parse(md.at("gaia.vocab")), path.string() + " [gaia.vocab]");
+      if (md.count("gaia.action_share")) {
+        const double a = std::stod(md.at("gaia.action_share"));
+        if (!(a >= 0 && a <= 1)) fail("{}: gaia.action_share must be in [0, 1], got {}", path.string(), a);
+        info.action_share = a;
+      }
     } catch (const nlohmann::json::exception& e) {
       fail("{}: bad gaia.grid / gaia.vocab metadata ({})", path.string(), e.what());
     } catch (const std::out_of_range&) {
       fail("{}: missing gaia.grid / gaia.vocab metadata", path.string());
+    } catch (const std::invalid_argument&) {
+      fail("{}: gaia.action_share is not a number", path.string());
     }
   }
   WorldModel m(info.config.world, info.n(), info.K);

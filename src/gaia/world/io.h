@@ -10,6 +10,9 @@ struct WorldInfo {
   Config config;
   int64_t grid_h = 0, grid_w = 0, K = 0;
   text::Vocab vocab;
+  // Share of the training steps that had an action (speed or curvature); -1 = not recorded (older weights).
+  // 0 means the model never saw one: action conditioning (--steer, --speed, --actions) would do nothing.
+  double action_share = -1;
   int64_t n() const { return grid_h * grid_w; }
 };
 

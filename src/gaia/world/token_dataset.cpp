@@ -9,6 +9,7 @@
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
+#include "gaia/world/token_file.h"
 #include "gaia/train/checkpoint.h"
 
 namespace gaia::world {
@@ -35,16 +36,24 @@ std::vector<std::string> read_jsonl_strings(const fs::path& p) {
   return out;
 }
 
-// Token ids of an integer .npy as int32 (int16 from gaia tokenize; int32 / int64 from other tokenizers).
+// Token ids of an integer .npy as int32 (int16 from gaia tokenize).
 std::vector<int32_t> token_ids(const NpyArray& a, const fs::path& file) {
-  if (a.dtype != DType::I16 && a.dtype != DType::I32 && a.dtype != DType::I64 && a.dtype != DType::U8)
-    fail("{}: token array has dtype {}; want int16, int32 or int64", file.string(), safetensors_name(a.dtype));
+  if (!is_integer(a.dtype) || a.dtype == DType::BOOL)
+    fail("{}: token array has dtype {}; token ids must be integers", file.string(), safetensors_name(a.dtype));
   std::vector<int32_t> out;
   out.reserve(static_cast<size_t>(a.size()));
   for (int64_t v : a.to_int64()) {
     // Anything beyond int32 is out of every codebook; keep it negative so the range check reports it.
     out.push_back(v >= 0 && v <= std::numeric_limits<int32_t>::max() ? static_cast<int32_t>(v) : -1);
   }
+  return out;
+}
+
+std::vector<fs::path> token_files_in(const fs::path& dir) {
+  std::vector<fs::path> out;
+  for (auto& d : fs::directory_iterator(dir))
+    if (is_token_file(d.path())) out.push_back(d.path());
+  std::sort(out.begin(), out.end());
   return out;
 }
 
@@ -68,33 +77,31 @@ Conditioning ConditioningMix::draw(std::mt19937_64& rng, bool replay) const {
 }
 
 TokenDataset::TokenDataset(const fs::path& path, int64_t codebook_size, size_t cache_episodes)
-    : path_(path), cache_capacity_(std::max<size_t>(cache_episodes, 1)) {
-  if (!fs::exists(path)) fail("{}: no such token dataset (a directory from gaia tokenize, or a tokens .npy)", path.string());
+    : TokenDataset(path, [&] {
+        TokenFormat f;
+        f.codebook_size = codebook_size;
+        return f;
+      }(), cache_episodes) {}
+
+TokenDataset::TokenDataset(const fs::path& path, const TokenFormat& format, size_t cache_episodes)
+    : path_(path), format_(format), cache_capacity_(std::max<size_t>(cache_episodes, 1)) {
+  if (!fs::exists(path))
+    fail("{}: no such token dataset (a directory from gaia tokenize, or token files: docs/formats.md)", path.string());
   if (fs::is_regular_file(path)) {
-    // A bare [frames, h, w] array from another tokenizer: one episode, no actions, no text, no metadata.
-    NpyArray a = npy_read(path);
-    if (a.shape.size() != 3 || a.shape[0] < 1 || a.shape[1] < 1 || a.shape[2] < 1)
-      fail("{}: a token array must be [frames, h, w], got {}", path.string(), shape_str(a.shape));
-    auto ep = std::make_shared<TokenEpisode>();
-    ep->tokens = token_ids(a, path);
-    h_ = a.shape[1];
-    w_ = a.shape[2];
-    int32_t lo = *std::min_element(ep->tokens.begin(), ep->tokens.end());
-    int32_t hi = *std::max_element(ep->tokens.begin(), ep->tokens.end());
-    if (lo < 0) fail("{}: negative token id (or one beyond int32) in the array", path.string());
-    K_ = codebook_size > 0 ? codebook_size : int64_t(hi) + 1;
-    check_tokens(ep->tokens, path);
-    Info info;
-    info.meta.id = path.stem().string();
-    info.steps = a.shape[0];
-    info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);
-    ids_.push_back(info.meta.id);
-    info_.push_back(std::move(info));
-    bare_ = std::move(ep);
+    if (!is_token_file(path)) fail("{}: not a token file (want .npy or .safetensors)", path.string());
+    open_file(format);
     return;
   }
   fs::path hf = path / "dataset.json";
-  if (!fs::exists(hf)) fail("{}: not a gaia token dataset (no dataset.json; make one with gaia tokenize)", path.string());
+  if (!fs::exists(hf)) {
+    auto files = token_files_in(path);
+    if (files.empty())
+      fail("{}: not a token dataset (no dataset.json from gaia tokenize, and no .npy or .safetensors token files)",
+           path.string());
+    open_files(files, format);
+    return;
+  }
+  const int64_t codebook_size = format.codebook_size;
   json header = read_json(hf);
   try {
     if (header.at("format").get<std::string>() != "gaia-tokens")
@@ -148,8 +155,60 @@ TokenDataset::TokenDataset(const fs::path& path, int64_t codebook_size, size_t c
   }
 }
 
+void TokenDataset::open_file(const TokenFormat& f) {
+  // One drive: training on its first part, validation on its end, so early stopping and the best checkpoint work.
+  TokenArray a = read_token_file(path_, f);
+  h_ = a.h;
+  w_ = a.w;
+  K_ = f.codebook_size > 0 ? f.codebook_size : *std::max_element(a.ids.begin(), a.ids.end()) + 1;
+  rate_hz_ = f.dataset_rate_hz();
+  if (!(f.val_fraction >= 0 && f.val_fraction < 1)) fail("validation fraction must be in [0, 1), got {}", f.val_fraction);
+  const int64_t held = std::min(a.steps - 1, static_cast<int64_t>(std::llround(double(a.steps) * f.val_fraction)));
+  const int64_t n = h_ * w_, cut = a.steps - held;
+  const std::string stem = path_.stem().string();
+  for (int part = 0; part < (held > 0 ? 2 : 1); ++part) {
+    const int64_t s0 = part == 0 ? 0 : cut, s1 = part == 0 ? cut : a.steps;
+    auto ep = std::make_shared<TokenEpisode>();
+    ep->tokens.assign(a.ids.begin() + s0 * n, a.ids.begin() + s1 * n);
+    Info info;
+    info.meta.id = part == 0 ? stem : stem + ".held-out";  // sorts after the stem: ids_ stays sorted
+    info.steps = s1 - s0;
+    info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);
+    ids_.push_back(info.meta.id);
+    info_.push_back(std::move(info));
+    preloaded_.push_back(std::move(ep));
+  }
+}
+
+void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFormat& f) {
+  // Every file is read once here (frame counts, one grid, K); later reads go through the episode cache.
+  int64_t top = -1;
+  for (const auto& file : files) {
+    TokenArray a = read_token_file(file, f);
+    if (files_.empty()) {
+      h_ = a.h;
+      w_ = a.w;
+    } else if (a.h != h_ || a.w != w_) {
+      fail("{}: a {}x{} token grid, but {} has {}x{}", file.string(), a.h, a.w, files_[0].string(), h_, w_);
+    }
+    top = std::max<int64_t>(top, *std::max_element(a.ids.begin(), a.ids.end()));
+    Info info;
+    info.meta.id = file.stem().string();
+    if (!ids_.empty() && ids_.back() == info.meta.id)
+      fail("{}: two token files named '{}' (.npy and .safetensors?); keep one", path_.string(), info.meta.id);
+    info.steps = a.steps;
+    info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);
+    ids_.push_back(info.meta.id);
+    info_.push_back(std::move(info));
+    files_.push_back(file);
+  }
+  K_ = f.codebook_size > 0 ? f.codebook_size : top + 1;
+  rate_hz_ = f.dataset_rate_hz();
+}
+
 fs::path TokenDataset::episode_dir(size_t e) const {
   if (bare()) return path_;
+  if (!files_.empty()) return files_.at(e);
   return path_ / "episodes" / ids_.at(e);
 }
 
@@ -163,6 +222,15 @@ void TokenDataset::check_tokens(const std::vector<int32_t>& t, const fs::path& f
 }
 
 std::shared_ptr<const TokenEpisode> TokenDataset::load(size_t e) const {
+  if (!files_.empty()) {
+    auto ep = std::make_shared<TokenEpisode>();
+    TokenFormat f = format_;
+    f.codebook_size = K_;
+    TokenArray a = read_token_file(files_.at(e), f);
+    if (a.steps != steps(e) || a.h != h_ || a.w != w_) fail("{}: changed while in use", files_[e].string());
+    ep->tokens = std::move(a.ids);
+    return ep;
+  }
   fs::path dir = episode_dir(e), tf = dir / "tokens.npy";
   const int64_t T = steps(e);
   NpyArray a = npy_read(tf);
@@ -183,7 +251,7 @@ std::shared_ptr<const TokenEpisode> TokenDataset::load(size_t e) const {
 
 std::shared_ptr<const TokenEpisode> TokenDataset::episode(size_t e) const {
   if (e >= size()) fail("{}: episode {} out of range [0, {})", path_.string(), e, size());
-  if (bare_) return bare_;
+  if (bare()) return preloaded_.at(e);
   {
     std::lock_guard<std::mutex> lock(mu_);
     for (auto it = cache_.begin(); it != cache_.end(); ++it)
@@ -202,12 +270,12 @@ std::shared_ptr<const TokenEpisode> TokenDataset::episode(size_t e) const {
 }
 
 void TokenDataset::check_all() const {
-  if (bare_) return;  // checked at open
+  if (bare()) return;  // checked at open
   for (size_t e = 0; e < size(); ++e) load(e);
 }
 
 data::Split TokenDataset::split(double val_fraction, uint64_t seed) const {
-  if (bare()) return data::Split{ids_, {}, {}};
+  if (bare()) return data::Split{{ids_[0]}, {}, {ids_.begin() + 1, ids_.end()}};
   return data::load_or_default_split(path_, ids_, val_fraction, seed);
 }
 

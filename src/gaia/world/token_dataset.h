@@ -3,8 +3,10 @@
 // "Token dataset"), cut into windows of T consecutive steps, drawn with the §3 balancing, and turned into
 // WorldBatch examples that are unconditional, action- or text-conditioned in the §4.2 ratios (20/40/40).
 //
-//   TokenDataset   TOKENS/ (dataset.json, episodes/<id>/{tokens.npy, actions.npy, captions.jsonl, episode.json})
-//                  or a bare tokens .npy [frames, h, w] = one episode without actions or text
+//   TokenDataset   TOKENS/ (dataset.json, episodes/<id>/{tokens.npy, actions.npy, captions.jsonl, episode.json});
+//                  or token files of another tokenizer (token_file.h), without actions, text or metadata:
+//                  one file = one drive split in time (the last val_fraction held out), a directory of them =
+//                  one episode a file, held out by file (or by its split.json)
 //   Window         steps [start, start + steps) of one episode; never crosses episodes
 //   WindowSampler  uniform or balanced (data::Balancer over weather, time of day, location, steering, speed)
 //   make_batch     windows -> tokens [B,T,n], actions [B,T,2] (normalised), text_ids [B,T,m], use_action/use_text
@@ -28,6 +30,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/text/vocab.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/token_file.h"
 
 namespace gaia::world {
 
@@ -59,12 +62,15 @@ struct TokenEpisode {
 
 class TokenDataset {
  public:
-  // `codebook_size` > 0 states K: it must equal dataset.json's for a directory, and sets K for a bare .npy (whose
-  // K is otherwise its largest token + 1). Errors name the file at fault.
+  // `format.codebook_size` > 0 states K: it must equal dataset.json's for a gaia token dataset, and sets K for
+  // other tokenizers' files (whose K is otherwise their largest token + 1). The rest of `format` applies to other
+  // tokenizers' files only. Errors name the file at fault.
+  explicit TokenDataset(const fs::path& path, const TokenFormat& format, size_t cache_episodes = 256);
   explicit TokenDataset(const fs::path& path, int64_t codebook_size = 0, size_t cache_episodes = 256);
 
   const fs::path& path() const { return path_; }
-  bool bare() const { return bare_ != nullptr; }  // a single .npy: no actions, no captions, no metadata
+  bool bare() const { return !preloaded_.empty(); }  // one file: the drive and its held-out end, both in memory
+  bool foreign() const { return !files_.empty() || bare(); }  // another tokenizer's: no actions, text or metadata
   int64_t grid_h() const { return h_; }
   int64_t grid_w() const { return w_; }
   int64_t tokens_per_step() const { return h_ * w_; }  // n
@@ -84,7 +90,7 @@ class TokenDataset {
   void check_all() const;  // reads and checks every episode (streaming), e.g. before a long training run
 
   // TOKENS/split.json when present (`gaia tokenize` copies the source dataset's, so geofenced validation carries
-  // over), otherwise the seeded random hold-out of data::load_or_default_split. A bare .npy is all training.
+  // over), otherwise the seeded random hold-out of data::load_or_default_split. One file: its end, in time.
   data::Split split(double val_fraction = 0.1, uint64_t seed = 0) const;
   std::vector<size_t> indices(const std::vector<std::string>& ids) const;  // fails naming split.json on unknown ids
 
@@ -109,13 +115,18 @@ class TokenDataset {
   std::shared_ptr<const TokenEpisode> load(size_t e) const;
   void check_tokens(const std::vector<int32_t>& t, const fs::path& file) const;
 
+  void open_file(const TokenFormat& f);
+  void open_files(const std::vector<fs::path>& files, const TokenFormat& f);
+
   fs::path path_;
+  TokenFormat format_;
+  std::vector<fs::path> files_;  // a directory of other tokenizers' files: episode e is files_[e]
   int64_t h_ = 0, w_ = 0, K_ = 0;
   double rate_hz_ = 0;
   bool has_captions_ = false;
   std::vector<std::string> ids_;
   std::vector<Info> info_;
-  std::shared_ptr<const TokenEpisode> bare_;  // the whole array of a bare .npy, kept for the dataset's life
+  std::vector<std::shared_ptr<const TokenEpisode>> preloaded_;  // one file: its training part and held-out end
 
   // Least-recently-used cache of loaded episodes (front = most recent).
   size_t cache_capacity_;

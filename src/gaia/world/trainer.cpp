@@ -52,8 +52,12 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   sizing::check_memory(16.0 * double(sizing::world_params(cfg).total), "training this world model (world.*)");
   train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
 
-  // A directory states K in dataset.json; a bare token .npy takes it from the config, never from its largest id.
-  TokenDataset ds(opt.tokens, fs::is_directory(opt.tokens) ? 0 : cfg.tokenizer.codebook_size);
+  // gaia tokenize's datasets state K in dataset.json; other tokenizers' files take it from the format or the
+  // config, never from their largest id.
+  TokenFormat format = opt.format;
+  if (format.codebook_size == 0 && !fs::exists(opt.tokens / "dataset.json"))
+    format.codebook_size = cfg.tokenizer.codebook_size;
+  TokenDataset ds(opt.tokens, format);
   const int64_t T = wc.context_steps;
   auto split = ds.split(0.1, cfg.run.seed);
   auto train_eps = ds.indices(split.train);
@@ -62,7 +66,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   auto train_windows = ds.windows(train_eps, T, 1);
   if (train_windows.empty())
     fail("{}: no training window of {} steps (world.context_steps); episodes are too short", opt.tokens.string(), T);
-  WindowSampler sampler(ds, train_windows, ds.bare() ? std::vector<std::string>{} : cfg.data.balance_world,
+  WindowSampler sampler(ds, train_windows, ds.foreign() ? std::vector<std::string>{} : cfg.data.balance_world,
                         cfg.data.balance_exponent, cfg.data.balance_bins);
   // Fine-tuning keeps the --init model's vocabulary (on other data, word counts would renumber the words its
   // text embeddings were trained on), also when a fine-tuning run resumes.
@@ -89,6 +93,18 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
+  {
+    int64_t steps = 0, with = 0;
+    for (size_t e : train_eps) {
+      const auto& a = ds.actions(e);
+      for (size_t t = 0; t + 1 < a.size(); t += 2, ++steps) with += !std::isnan(a[t]) || !std::isnan(a[t + 1]);
+    }
+    info.action_share = steps ? double(with) / double(steps) : 0.0;
+    if (with == 0)
+      note(fmt::format("no actions in {}: the model learns no action conditioning, and gaia generate will refuse "
+                       "--steer / --speed / --actions with it (give the drives signals, or estimate them from the video: "
+                       "gaia ingest --motion video, gaia data motion)", opt.tokens.string()));
+  }
 
   fs::path ckpt = opt.out / "checkpoint";
   int step = 0;

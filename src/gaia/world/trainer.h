@@ -9,12 +9,14 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/config.h"
+#include "gaia/world/token_file.h"
 #include "gaia/core/fs.h"
 
 namespace gaia::world {
 
 struct WorldTrainOptions {
   fs::path tokens, out;       // OUT/checkpoint/ (resumable), OUT/world.safetensors, OUT/metrics.jsonl
+  TokenFormat format;         // for other tokenizers' files; K unstated = the config's tokenizer.codebook_size
   fs::path init;              // fine-tuning: start from these weights (and keep their text vocabulary)
   int steps = -1;             // -1: config world.steps
   int val_every = 250;

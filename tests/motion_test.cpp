@@ -1,0 +1,161 @@
+// Ego-motion from video (data/motion.h): against the procedural world's truth, on frames where it cannot tell,
+// through ingest, and on the real KITTI drive against its OXTS record.
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "gaia/core/fs.h"
+#include "gaia/data/episode.h"
+#include "gaia/data/ingest.h"
+#include "gaia/data/motion.h"
+#include "gaia/synth/synth.h"
+#include "test_util.h"
+
+using namespace gaia;
+using namespace gaia::data;
+
+namespace {
+
+// A drive of the procedural world rendered in memory, with its true actions (frame i: the action from i to i+1).
+struct Drive {
+  MotionEstimate est;
+  std::vector<double> speed, curvature;
+};
+
+Drive synth_drive(const std::string& scene, uint64_t seed, double seconds, int h = 288, int w = 512) {
+  synth::SynthOptions o;
+  o.height = h;
+  o.width = w;
+  o.seconds = seconds;
+  o.seed = seed;
+  o.scene = scene;
+  o.weather = "clear";
+  o.time_of_day = "day";
+  synth::Simulator sim(o, 0);
+  MotionOptions mo;
+  mo.camera_height = synth::CameraModel{}.height;
+  mo.hfov_deg = synth::CameraModel{}.hfov_deg;
+  MotionEstimator est({}, mo);
+  Drive d;
+  const int n = int(std::lround(seconds * o.fps));
+  for (int i = 0; i < n; ++i) {
+    const auto a = sim.policy();
+    est.add(sim.render(), i / o.fps);
+    d.speed.push_back(a.speed);
+    d.curvature.push_back(a.curvature);
+    sim.step(a);
+  }
+  d.est = est.finish();
+  return d;
+}
+
+}  // namespace
+
+TEST(MotionSlow, ProceduralDrivesSpeedAndTurnDirection) {
+  std::vector<double> ev, ek, tv, tk;
+  // Town drives: the procedural world's roads are textured enough there (its open country roads are flat colour,
+  // where the estimate says "no road plane" rather than guess).
+  for (uint64_t seed : {1, 4}) {
+    const Drive d = synth_drive("bend", seed, 6.0);
+    ev.insert(ev.end(), d.est.speed.begin(), d.est.speed.end());
+    ek.insert(ek.end(), d.est.curvature.begin(), d.est.curvature.end());
+    tv.insert(tv.end(), d.speed.begin(), d.speed.end());
+    tk.insert(tk.end(), d.curvature.begin(), d.curvature.end());
+  }
+  const auto g = compare_motion(ev, ek, tv, tk);
+  // The targets on drives of the evaluation size (docs/evaluation.md has the full set's figures).
+  EXPECT_GT(g.frames, 200) << g.summary();
+  EXPECT_LT(g.median_speed_rel_error, 0.1) << g.summary();
+  EXPECT_GT(g.curvature_frames, 50) << g.summary();
+  EXPECT_GT(g.curvature_sign_agreement, 0.95) << g.summary();
+  EXPECT_LT(g.yaw_rate_mae, 0.01) << g.summary();
+}
+
+TEST(Motion, StillAndBlankFramesSayWhy) {
+  cv::Mat scene(120, 200, CV_8UC3);
+  cv::randu(scene, 0, 255);
+  cv::GaussianBlur(scene, scene, cv::Size(5, 5), 1.5);
+  MotionEstimator still({}, {});
+  for (int i = 0; i < 8; ++i) still.add(scene, i * 0.1);
+  const auto s = still.finish();
+  ASSERT_EQ(s.speed.size(), 8u);
+  EXPECT_EQ(s.speed[3], 0.0);
+  EXPECT_TRUE(std::isnan(s.curvature[3]));
+  EXPECT_EQ(s.reason[3], "standing still");
+
+  MotionEstimator blank({}, {});
+  for (int i = 0; i < 5; ++i) blank.add(cv::Mat(120, 200, CV_8UC3, cv::Scalar(20, 20, 20)), i * 0.1);
+  const auto b = blank.finish();
+  EXPECT_TRUE(std::isnan(b.speed[2]));
+  EXPECT_EQ(b.reason[2], "too few tracks");
+  EXPECT_EQ(b.frames_with_speed(), 0);
+
+  MotionEstimator one({}, {});
+  one.add(scene, 0);
+  EXPECT_EQ(one.finish().reason[0], "one frame");
+  MotionEstimator back({}, {});
+  back.add(scene, 1.0);
+  EXPECT_NE(test::error_of([&] { back.add(scene, 0.5); }).find("must increase"), std::string::npos);
+  MotionOptions bad;
+  bad.camera_height = 0;
+  EXPECT_NE(test::error_of([&] { MotionEstimator({}, bad); }).find("--camera-height"), std::string::npos);
+}
+
+TEST(MotionSlow, IngestEstimatesWhereNoSignalsAreGiven) {
+  test::TempDir dir;
+  fs::create_directories(dir / "frames");
+  synth::SynthOptions o;
+  o.height = 288;
+  o.width = 512;
+  o.seconds = 3;
+  o.seed = 1;
+  o.scene = "bend";
+  synth::Simulator sim(o, 0);
+  double true_speed = 0;
+  for (int i = 0; i < 75; ++i) {
+    const auto a = sim.policy();
+    true_speed += a.speed / 75;
+    cv::imwrite((dir / "frames" / fmt::format("{:03d}.png", i)).string(), sim.render());
+    sim.step(a);
+  }
+  IngestOptions io;
+  io.height = 36;
+  io.width = 64;
+  io.fps = 25;
+  io.motion_video = true;
+  io.motion.camera_height = 1.45;
+  const auto r = ingest_video(dir / "frames", dir / "ds", io);
+  EXPECT_EQ(r.meta.signals_source, "estimated");
+  EXPECT_GT(r.frames_estimated, 60);
+  EXPECT_TRUE(r.motion_agreement.empty());
+  Episode ep(dir / "ds" / "episodes" / "frames");
+  EXPECT_EQ(ep.meta().signals_source, "estimated");
+  EXPECT_NEAR(ep.speed(40), true_speed, 0.2 * true_speed);
+  EXPECT_TRUE(fs::exists(ep.dir() / "motion_confidence.npy"));
+
+  // `gaia data motion`'s path: the stored (small) frames, written back as the episode's signals.
+  const auto est = estimate_episode_motion(ep, {}, io.motion);
+  EXPECT_EQ(int64_t(est.speed.size()), ep.size());
+  write_estimated_signals(ep, est);
+  Episode again(ep.dir());
+  EXPECT_EQ(again.meta().signals_source, "estimated");
+  EXPECT_EQ(again.size(), 75);
+}
+
+TEST(MotionSlow, RealKittiDriveAgainstItsOxts) {
+  const fs::path real = test::real_data_dir();
+  const fs::path d = real / "kitti-raw-0002-color-10f" / "2011_09_26" / "2011_09_26_drive_0002_sync";
+  if (real.empty() || !fs::exists(d)) GTEST_SKIP() << "shared KITTI raw drive not found";
+  test::TempDir dir;
+  IngestOptions o;
+  o.motion_video = true;
+  o.motion.smooth_s = 0.3;
+  const auto r = ingest_kitti(d, dir / "ds", o);
+  EXPECT_EQ(r.meta.signals_source, "kitti-oxts");  // measured signals stay; the estimate is compared with them
+  EXPECT_NE(r.motion_agreement.find("median speed difference"), std::string::npos) << r.motion_agreement;
+  EXPECT_GE(r.frames_estimated, 8);
+}
