@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-ALL=(safetensors npy signals_csv config_yaml episode_meta)
+ALL=(safetensors npy signals_csv config_yaml episode_meta gps_track)
 SECONDS_PER=${1:-600}
 shift || true
 TARGETS=("$@")

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -158,4 +159,29 @@ TEST(MotionSlow, RealKittiDriveAgainstItsOxts) {
   EXPECT_EQ(r.meta.signals_source, "kitti-oxts");  // measured signals stay; the estimate is compared with them
   EXPECT_NE(r.motion_agreement.find("median speed difference"), std::string::npos) << r.motion_agreement;
   EXPECT_GE(r.frames_estimated, 8);
+}
+
+TEST(MotionCli, DataMotionComparesEstimatesAndReplacesOnlyWhenAsked) {
+  test::TempDir dir;
+  auto r = test::run_gaia("synth --episodes 1 --seconds 2 --size 288x512 --seed 1 --scene bend --threads 1 --out " +
+                          test::q(dir / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("data motion " + test::q(dir / "ds") + " --compare --camera-height 1.45 --threads 1 --out " +
+                     test::q(dir / "cmp.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("all 1 episodes:"), std::string::npos) << r.output;
+  const auto j = nlohmann::json::parse(read_file(dir / "cmp.json"));
+  EXPECT_GT(j["all"]["frames"].get<int>(), 0);
+  EXPECT_LT(j["all"]["median_speed_rel_error"].get<double>(), 0.25);
+  // Measured signals are kept unless --replace says otherwise; with nothing to estimate, that is an error.
+  r = test::run_gaia("data motion " + test::q(dir / "ds") + " --threads 1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("keeps its synth signals"), std::string::npos) << r.output;
+  r = test::run_gaia("data motion " + test::q(dir / "ds") + " --replace --camera-height 1.45 --threads 1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  Episode ep(dir / "ds" / "episodes" / "synth-s1-e00000");
+  EXPECT_EQ(ep.meta().signals_source, "estimated");
+  EXPECT_TRUE(fs::exists(ep.dir() / "motion_confidence.npy"));
+  r = test::run_gaia("data motion " + test::q(dir / "ds") + " --compare --replace");
+  EXPECT_NE(r.output.find("cannot --replace"), std::string::npos) << r.output;
 }

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "gaia/core/fs.h"
 #include "gaia/core/npy.h"
@@ -214,6 +215,10 @@ TEST(TokenFileCli, CommaVqMinuteTrainsWithValidationAndRefusesSteering) {
   EXPECT_NE(r.output.find("no actions in"), std::string::npos) << r.output;        // said, not silent
   EXPECT_EQ(r.output.find("validation skipped"), std::string::npos) << r.output;  // its held-out end is scored
   EXPECT_NE(r.output.find("bits/token"), std::string::npos) << r.output;
+  // The best validation's weights are kept beside the last ones.
+  EXPECT_NE(r.output.find("best validation"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(dir / "run" / "best.safetensors"));
+  EXPECT_EQ(nlohmann::json::parse(read_file(dir / "run" / "best.json")).at("step").get<int>(), 4);
   const auto w = " --world " + test::q(dir / "run" / "world.safetensors");
   // The model takes its grid and K from the weights: the flat file needs no --grid now.
   r = test::run_gaia("world eval " + test::q(file) + " --token-fps 20" + w + tiny + " --max-windows 2");

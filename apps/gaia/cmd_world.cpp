@@ -90,6 +90,9 @@ void register_world(CLI::App& app) {
       const int total = opt.steps > 0 ? opt.steps : c.world.steps;
       std::printf("world: step %d%s; last validation %s\n", r.final_step,
                   r.final_step >= total ? " (done)" : " (checkpointed)", r.last_val.dump().c_str());
+      if (r.best_step >= 0)
+        std::printf("world: best validation %.4f bits/token at step %d -> %s\n", r.best_bits, r.best_step,
+                    (fs::path(flags->out) / "best.safetensors").c_str());
     });
   }
 

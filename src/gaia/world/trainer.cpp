@@ -2,9 +2,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <fstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/sizing/sizing.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
@@ -155,6 +157,24 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
                            {step, {{"config", cfg.name}}});
     save_world(model, info, opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
   };
+  // The best validation so far (OUT/best.safetensors + OUT/best.json, kept across resumes): on a small dataset the
+  // last step has often memorised the training drives, and the best held-out score came earlier.
+  const fs::path best_json = opt.out / "best.json";
+  double best_bits = std::numeric_limits<double>::infinity();
+  if (!result.resumed) {  // a fresh run: an older run's best is not this one's
+    fs::remove(best_json);
+    fs::remove(opt.out / "best.safetensors");
+  }
+  if (fs::exists(best_json)) best_bits = read_json(best_json).value("bits_per_token", best_bits);
+  auto keep_if_best = [&](const nlohmann::json& v) {
+    if (!v.contains("bits_per_token")) return;
+    const double b = v["bits_per_token"].get<double>();
+    if (!(b < best_bits)) return;
+    best_bits = b;
+    save_world(model, info, opt.out / "best.safetensors");  // weights first: best.json never names weights not there
+    write_file_atomic(best_json, nlohmann::json({{"step", step}, {"bits_per_token", b}}).dump(2) + "\n");
+    result.best_step = step;
+  };
   auto validate = [&]() {
     nlohmann::json v;
     if (val_windows.empty()) return v;
@@ -224,6 +244,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
+      keep_if_best(log.val);
     }
     nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
                                {"tokens_per_s", log.tokens_per_s}, {"val", log.val}});
@@ -233,6 +254,8 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
+  result.best_bits = best_bits;
+  if (fs::exists(best_json)) result.best_step = read_json(best_json).value("step", -1);
   if (step >= total) save_world(model, info, opt.out / "world.safetensors");
   return result;
 }

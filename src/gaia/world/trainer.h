@@ -15,7 +15,8 @@
 namespace gaia::world {
 
 struct WorldTrainOptions {
-  fs::path tokens, out;       // OUT/checkpoint/ (resumable), OUT/world.safetensors, OUT/metrics.jsonl
+  fs::path tokens, out;       // OUT/checkpoint/ (resumable), OUT/world.safetensors (last), OUT/best.safetensors
+                              // (best validation, with best.json), OUT/metrics.jsonl
   TokenFormat format;         // for other tokenizers' files; K unstated = the config's tokenizer.codebook_size
   fs::path init;              // fine-tuning: start from these weights (and keep their text vocabulary)
   int steps = -1;             // -1: config world.steps
@@ -50,6 +51,8 @@ struct WorldTrainResult {
   int final_step = 0;
   bool resumed = false;
   nlohmann::json last_val;
+  int best_step = -1;       // the validation with the lowest bits/token (OUT/best.safetensors); -1 = none
+  double best_bits = 0;
   std::vector<std::string> notes;
 };
 
