@@ -121,3 +121,38 @@ TEST(TrainAllSlow, RunsEveryStageShipsAndResumes) {
   EXPECT_NE(r.output.find("--world-cf-rounds"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "x"));
 }
+
+TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
+  test::TempDir d;
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  // Stand-ins for ingested drives: any gaia dataset of the config's frame size.
+  auto r = test::run_gaia("synth --episodes 2 --seconds 3 --size 32x64 --seed 9 --threads 1 --out " + q(d / "mine"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const std::string cmd = "train-all --data " + q(d / "mine") + " --synth 1 --seconds 3" + tiny +
+                          " --tokenizer-steps 4 --world-steps 3 --decoder-steps 2 --skip-eval --ship " + q(d / "models") +
+                          " --out " + q(d / "runs");
+  r = test::run_gaia(cmd);
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors"})
+    EXPECT_TRUE(fs::exists(d / "models" / f)) << f;
+  EXPECT_FALSE(fs::exists(d / "models" / "probe-scene.safetensors"));  // probes need labelled drives
+  // Your episodes are linked, not copied or changed, beside the procedural one.
+  data::Dataset mixed(d / "runs" / "data");
+  EXPECT_EQ(mixed.size(), 3u);
+  EXPECT_TRUE(fs::is_symlink(d / "runs" / "data" / "episodes" / "synth-s9-e00000"));
+  EXPECT_TRUE(fs::exists(d / "runs" / "data" / "episodes" / "synth-s1-e00000" / "episode.json"));
+  r = test::run_gaia(cmd);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(count(r.output, "skipped"), 10) << r.output;  // data, synth, five trainers and steps, three copies
+  // Bad input before any stage: not a dataset, another frame size, --from without the models, --synth alone.
+  r = test::run_gaia("train-all --data " + q(d / "nope") + tiny + " --out " + q(d / "x"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("nope"), std::string::npos) << r.output;
+  r = test::run_gaia("train-all --data " + q(d / "mine") + " --threads 1 --out " + q(d / "x"));
+  EXPECT_NE(r.output.find("episodes are 32x64, the config's data size is 72x128"), std::string::npos) << r.output;
+  r = test::run_gaia("train-all --data " + q(d / "mine") + " --from " + q(d / "empty") + tiny + " --out " + q(d / "x"));
+  EXPECT_NE(r.output.find("no tokenizer.safetensors there"), std::string::npos) << r.output;
+  r = test::run_gaia("train-all --synth 3" + tiny + " --out " + q(d / "x"));
+  EXPECT_NE(r.output.find("go with --data"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "x"));
+}

@@ -1,15 +1,18 @@
 // gaia train-all: the recipe that makes every model of models/ from nothing: procedural data, tokenizer
 // (+ a fine-tune without the GAN term, whose adversarial gradient a CPU-sized batch cannot balance), tokens, world model, video decoder, both probes,
-// their evaluations, and optionally the fp16 copies for models/. Each stage is this binary run as a child process
-// with its own progress bar; every stage resumes from its checkpoint and a finished stage is skipped, so an
-// interrupted recipe continues where it stopped.
+// their evaluations, and optionally the fp16 copies for models/. With --data it runs on the user's ingested drives
+// instead (mixed with procedural ones when asked; from the shipped models with --from). Each stage is this binary
+// run as a child process with its own progress bar; every stage resumes from its checkpoint and a finished stage is
+// skipped, so an interrupted recipe continues where it stopped.
 #include <chrono>
 #include <cstdio>
+#include <functional>
 
 #include <nlohmann/json.hpp>
 
 #include "common.h"
 #include "gaia/core/error.h"
+#include "gaia/data/episode.h"
 
 namespace gaia::app {
 
@@ -20,7 +23,21 @@ struct Stage {
   std::vector<std::string> args;  // after "gaia"
   fs::path done;                  // the stage is finished when this exists
   bool write_done = false;        // the command leaves no single final file: write `done` when it succeeds
+  std::function<void()> in_process = {};  // instead of a child process (args then only describe it)
 };
+
+// OUT/data: the user's episodes (linked, never copied or changed) and their split, in a dataset that procedural
+// drives can be added to.
+void link_dataset(const fs::path& from, const fs::path& to) {
+  data::Dataset src(from);
+  data::ensure_dataset(to);
+  fs::create_directories(to / "episodes");
+  for (const auto& id : src.ids()) {
+    const fs::path link = to / "episodes" / id;
+    if (!fs::exists(fs::symlink_status(link))) fs::create_directory_symlink(fs::absolute(from / "episodes" / id), link);
+  }
+  if (fs::exists(from / "split.json")) fs::copy_file(from / "split.json", to / "split.json", fs::copy_options::overwrite_existing);
+}
 
 std::string joined(const std::vector<std::string>& a) {
   std::string s = "gaia";
@@ -41,6 +58,8 @@ void register_train_all(CLI::App& app) {
   auto swerve = std::make_shared<double>(0.035);
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
+  auto user_data = std::make_shared<std::string>(), from = std::make_shared<std::string>();
+  auto synth_mix = std::make_shared<int>(0);
   // Steps of each stage, each stage one run.
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
@@ -57,6 +76,13 @@ void register_train_all(CLI::App& app) {
                   "further wandering episodes whose driver also swerves off its lane and back (recipe: 80; they show "
                   "the world model the strong turns and drifts that gaia eval commands)");
   cmd->add_option("--swerve", *swerve, "their largest swerve curvature, 1/m (recipe: 0.035)");
+  cmd->add_option("--data", *user_data, "your dataset (gaia ingest): tokenizer, tokens, world model and video decoder "
+                  "on your drives instead of procedural ones (no probes or gaia eval: they need labelled drives)");
+  cmd->add_option("--synth", *synth_mix, "with --data: also this many procedural drives (of --seconds) mixed in")
+      ->check(number_in({0, 1e6}));
+  cmd->add_option("--from", *from, "with --data: fine-tune the models in this directory (e.g. models: its "
+                  "tokenizer's decoder only, so the codes stay; world model and decoder from their weights) instead "
+                  "of training from nothing; for a user with little data");
   cmd->add_option("--ship", *ship, "also write fp16 copies of the final weights into this directory (e.g. models)");
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
@@ -76,6 +102,19 @@ void register_train_all(CLI::App& app) {
   add_shared_flags(cmd, flags.get(), "run directory (one folder per stage; default: runs/default)");
   cmd->callback([=] {
     Config c = resolve_config(*flags);  // validates --config / --set before hours of work start
+    if (user_data->empty() && (*synth_mix > 0 || !from->empty())) fail("--synth and --from go with --data DIR");
+    if (!user_data->empty()) {
+      // Your drives: checked before anything runs (a dataset, of the config's frame size).
+      data::Dataset mine(*user_data);
+      if (mine.size() == 0) fail("{}: no episodes (gaia ingest adds them)", *user_data);
+      const auto m0 = mine.meta(0);
+      if (m0.height != c.data.height || m0.width != c.data.width)
+        fail("{}: episodes are {}x{}, the config's data size is {}x{} (--config the dataset was ingested with)",
+             *user_data, m0.height, m0.width, c.data.height, c.data.width);
+      if (!from->empty())
+        for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors"})
+          if (!fs::exists(fs::path(*from) / f)) fail("--from {}: no {} there", *from, f);
+    }
     const fs::path out = flags->out.empty() ? fs::path("runs/default") : fs::path(flags->out);
     DirLock lock(out);  // one train-all per --out (each stage also locks its own directory)
     std::vector<std::string> common;
@@ -107,7 +146,49 @@ void register_train_all(CLI::App& app) {
                          "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / dir).string()});
       return with(a);
     };
-    std::vector<Stage> stages = {
+    std::vector<Stage> stages;
+    if (!user_data->empty()) {
+      const std::string data = (out / "data").string(), tk = (out / "tokenizer" / "tokenizer.safetensors").string();
+      const std::string trained_world = (out / "world" / "world.safetensors").string();
+      const fs::path src = *user_data;
+      stages.push_back({"data", {"(link the episodes of " + *user_data + " into " + data + ")"}, out / "data" / ".complete",
+                        true, [src, data] { link_dataset(src, data); }});
+      if (*synth_mix > 0)
+        stages.push_back({"data-synth", with({"synth", "--episodes", std::to_string(*synth_mix), "--seconds",
+                                              fmt::format("{}", *seconds), "--seed", "1", "--out", data}),
+                          out / "data" / ".complete-synth", true});
+      const std::string tsteps = std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps);
+      if (from->empty()) {
+        stages.push_back({"tokenizer", with({"tokenizer", "train", data, "--steps", tsteps, "--out", (out / "tokenizer").string()}), tk});
+      } else {
+        // The decoder alone: every frame keeps the shipped codes, so the shipped world model and decoder still fit.
+        stages.push_back({"tokenizer", with({"tokenizer", "train", data, "--init", (fs::path(*from) / "tokenizer.safetensors").string(),
+                                             "--decoder-only", "--set", "tokenizer.ema_decay=0.999", "--steps", tsteps,
+                                             "--out", (out / "tokenizer").string()}), tk});
+      }
+      stages.push_back({"tokens", with({"tokenize", data, "--tokenizer", tk, "--mirror", "--out", tokens}),
+                        out / "tokens" / "dataset.json"});
+      std::vector<std::string> wa{"world", "train", tokens, "--steps", std::to_string(st->world)};
+      if (!from->empty())
+        wa.insert(wa.end(), {"--init", (fs::path(*from) / "world.safetensors").string(), "--set", "world.lr=2e-4",
+                             "--set", "world.warmup_steps=50"});
+      wa.insert(wa.end(), {"--out", (out / "world").string()});
+      stages.push_back({"world", with(wa), trained_world});
+      stages.push_back({"world-calibrate", with({"world", "calibrate", tokens, "--world", trained_world, "--out", world}), world});
+      std::vector<std::string> da{"decoder", "train", data, "--tokenizer", tk, "--steps", std::to_string(st->decoder)};
+      if (!from->empty()) da.insert(da.end(), {"--init", (fs::path(*from) / "decoder.safetensors").string()});
+      da.insert(da.end(), {"--out", (out / "decoder").string()});
+      stages.push_back({"decoder", with(da), decoder});
+      if (!*skip_eval)
+        stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
+                          out / "world-eval" / "eval.json"});
+      if (!ship->empty())
+        for (auto& [f, to] : std::vector<std::pair<std::string, std::string>>{
+                 {tk, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"}})
+          stages.push_back({"ship " + to, {"convert", f, "--half", "--out", (fs::path(*ship) / to).string()},
+                            fs::path(*ship) / to});
+    } else {
+    stages = {
         {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
                        "--seed", "1", "--out", synth}),
          out / "synth" / ".complete", true},
@@ -220,6 +301,7 @@ void register_train_all(CLI::App& app) {
         stages.push_back({"ship " + to, {"convert", from, "--half", "--out", (fs::path(*ship) / to).string()},
                           fs::path(*ship) / to});
     }
+    }  // the procedural recipe
     fs::create_directories(out);
     nlohmann::json log = nlohmann::json::array();
     for (size_t i = 0; i < stages.size(); ++i) {
@@ -232,7 +314,9 @@ void register_train_all(CLI::App& app) {
       }
       std::printf("[%zu/%zu] %s: %s\n", i + 1, stages.size(), s.name.c_str(), line.c_str());
       const auto t0 = std::chrono::steady_clock::now();
-      const int rc = run_gaia_child(s.args);
+      int rc = 0;
+      if (s.in_process) s.in_process();
+      else rc = run_gaia_child(s.args);
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (rc != 0) fail("train-all: stage '{}' failed (exit {}); fix it and run the same command again to resume", s.name, rc);
       if (s.write_done) write_file_atomic(s.done, "");
