@@ -68,7 +68,7 @@ TEST(MotionSlow, ProceduralDrivesSpeedAndTurnDirection) {
     tk.insert(tk.end(), d.curvature.begin(), d.curvature.end());
   }
   const auto g = compare_motion(ev, ek, tv, tk);
-  // The targets on drives of the evaluation size (docs/evaluation.md has the full set's figures).
+  // The targets for the estimate, on drives of the evaluation size.
   EXPECT_GT(g.frames, 200) << g.summary();
   EXPECT_LT(g.median_speed_rel_error, 0.1) << g.summary();
   EXPECT_GT(g.curvature_frames, 50) << g.summary();

@@ -1,7 +1,7 @@
 #pragma once
 // Ego-motion from video alone (monocular visual odometry), for drives without a CAN log, GPS track or OXTS:
 // speed (m/s) and curvature (1/m, + = left) for every frame, stored like measured signals with
-// signals_source "estimated" and a per-frame confidence (docs/formats.md, docs/evaluation.md "Ego-motion").
+// signals_source "estimated" and a per-frame confidence (docs/formats.md).
 //
 // Each frame with the latest one at least baseline_s before it, at their recorded resolution (halved while wider
 // than max_width):
@@ -32,7 +32,7 @@ struct CameraIntrinsics {
 };
 
 struct MotionOptions {
-  double camera_height = 1.4;  // metres above the road: a dashcam behind the mirror (KITTI: 1.65, gaia synth: 1.45)
+  double camera_height = 1.4;  // metres above the road: a dashcam behind the mirror (KITTI drives: kKittiCameraHeight)
   bool camera_height_stated = false;  // false: a source that knows its own (KITTI) may replace it
   double hfov_deg = 70;        // horizontal field of view when the focal length is unknown (dashcams: 60-120)
   int max_width = 1280;        // frames wider than this are halved before tracking
