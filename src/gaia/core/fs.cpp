@@ -33,6 +33,19 @@ std::string read_file(const fs::path& path) {
   return ss.str();
 }
 
+std::vector<std::string> read_lines(const fs::path& p) {
+  std::string text = read_file(p);
+  std::vector<std::string> lines;
+  size_t start = 0;
+  while (start < text.size()) {
+    size_t nl = text.find('\n', start);
+    if (nl == std::string::npos) nl = text.size();
+    lines.push_back(text.substr(start, nl - start));
+    start = nl + 1;
+  }
+  return lines;
+}
+
 void write_file_atomic(const fs::path& path, std::string_view bytes) {
   if (path.has_parent_path()) fs::create_directories(path.parent_path());
   fs::path tmp = path;

@@ -13,6 +13,8 @@ namespace fs = std::filesystem;
 
 // Reads a whole file; throws gaia::Error naming the path if it is missing or unreadable.
 std::string read_file(const fs::path& path);
+// Its lines, split at '\n' (a last line without one counts; nothing is trimmed).
+std::vector<std::string> read_lines(const fs::path& path);
 
 // Writes bytes to `path` atomically (temp file in the same directory, fsync, rename).
 void write_file_atomic(const fs::path& path, std::string_view bytes);

@@ -192,22 +192,6 @@ void EpisodeWriter::commit() {
   staging_->commit(overwrite_);
 }
 
-namespace {
-
-std::vector<std::string> read_lines(const fs::path& p) {
-  std::string text = read_file(p);
-  std::vector<std::string> lines;
-  size_t start = 0;
-  while (start < text.size()) {
-    size_t nl = text.find('\n', start);
-    if (nl == std::string::npos) nl = text.size();
-    lines.push_back(text.substr(start, nl - start));
-    start = nl + 1;
-  }
-  return lines;
-}
-
-}  // namespace
 
 Episode::Episode(const fs::path& dir) : dir_(dir) {
   fs::path mf = dir / "episode.json";

@@ -82,6 +82,8 @@ class EpisodeWriter {
   int64_t frames_written() const { return static_cast<int64_t>(times_.size()); }
   void commit();  // throws if no frames were written
   const EpisodeMeta& meta() const { return meta_; }
+  const std::vector<float>& speeds() const { return speed_; }          // of the frames appended so far
+  const std::vector<float>& curvatures() const { return curvature_; }
   // Replaces every frame's speed and curvature before commit (ego-motion estimated once all frames are seen),
   // with a per-frame confidence in [0, 1] (motion_confidence.npy) and the new signals_source.
   void set_signals(const std::vector<float>& speed, const std::vector<float>& curvature,

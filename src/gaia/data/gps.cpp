@@ -102,12 +102,9 @@ double gps_distance(double lat1, double lon1, double lat2, double lon2) {
 }
 
 GpsTrack read_nmea(const fs::path& file) {
-  const std::string text = read_file(file);
   GpsTrack rmc, gga;
-  std::stringstream ss(text);
-  std::string line;
   double last_gga = -1, day = 0;
-  while (std::getline(ss, line)) {
+  for (std::string line : read_lines(file)) {
     while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
     const size_t dollar = line.find('$');
     if (dollar == std::string::npos) continue;  // not a sentence (blank lines, logger comments)

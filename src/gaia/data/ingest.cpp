@@ -107,7 +107,6 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
   res.container_frames = std::max<int64_t>(0, src.frame_count_hint());
   std::unique_ptr<MotionEstimator> motion;
   if (opt.motion_video) motion = std::make_unique<MotionEstimator>(opt.camera, opt.motion);
-  std::vector<float> measured_speed, measured_curvature;
   VideoFrame vf;
   double first_t = 0, last_t = 0;
   int64_t total = opt.max_frames > 0 ? std::min(opt.max_frames, src.frame_count_hint()) : src.frame_count_hint();
@@ -123,11 +122,7 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
     }
     if (writer.frames_written() == 0) first_t = r.time_s;
     last_t = r.time_s;
-    if (motion) {
-      motion->add(vf.bgr, r.time_s);  // the recorded frame, before the resize
-      measured_speed.push_back(r.speed);
-      measured_curvature.push_back(r.curvature);
-    }
+    if (motion) motion->add(vf.bgr, r.time_s);  // the recorded frame, before the resize
     writer.append(r);
     if (progress) progress(writer.frames_written(), std::max(total, writer.frames_written()));
   }
@@ -156,8 +151,8 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
       res.warnings.push_back(fmt::format("{}: the camera never moves (a parked car?): every frame reads as standing "
                                          "still, so these frames teach no steering", video.string()));
     if (sig.present()) {
-      const std::vector<double> vs(measured_speed.begin(), measured_speed.end()),
-          ks(measured_curvature.begin(), measured_curvature.end());
+      const std::vector<double> vs(writer.speeds().begin(), writer.speeds().end()),
+          ks(writer.curvatures().begin(), writer.curvatures().end());
       res.motion_agreement = compare_motion(m.speed, m.curvature, vs, ks).summary();
     } else {
       std::vector<float> v(m.speed.begin(), m.speed.end()), k(m.curvature.begin(), m.curvature.end()),

@@ -19,13 +19,12 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 const char* const kCameras[] = {"image_02", "image_03", "image_00", "image_01"};
 
+// The non-blank lines, without trailing spaces or carriage returns.
 std::vector<std::string> lines_of(const fs::path& f) {
   std::vector<std::string> out;
-  std::stringstream ss(read_file(f));
-  std::string l;
-  while (std::getline(ss, l)) {
+  for (std::string l : read_lines(f)) {
     while (!l.empty() && (l.back() == '\r' || l.back() == ' ')) l.pop_back();
-    if (!l.empty()) out.push_back(l);
+    if (!l.empty()) out.push_back(std::move(l));
   }
   return out;
 }

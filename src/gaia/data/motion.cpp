@@ -266,23 +266,24 @@ MotionEstimate MotionEstimator::finish() const {
     std::vector<double> v, w, c;
     std::map<std::string, int> why;
     int total = 0;
-    for (const Pair& p : pairs_) {
-      if (std::abs(p.t_mid - mid) > opt_.smooth_s / 2) continue;
+    auto take = [&](const Pair& p) {
       ++total;
       if (!std::isnan(p.speed)) v.push_back(p.speed);
       if (!std::isnan(p.yaw_rate)) w.push_back(p.yaw_rate);
       c.push_back(std::isnan(p.speed) ? 0.0 : p.confidence);
       if (!p.reason.empty()) ++why[p.reason];
-    }
-    if (total == 0) {  // a window shorter than the pairs' spacing: the nearest pair
-      const Pair* best = &pairs_[0];
-      for (const Pair& p : pairs_)
-        if (std::abs(p.t_mid - mid) < std::abs(best->t_mid - mid)) best = &p;
-      total = 1;
-      if (!std::isnan(best->speed)) v.push_back(best->speed);
-      if (!std::isnan(best->yaw_rate)) w.push_back(best->yaw_rate);
-      c.push_back(std::isnan(best->speed) ? 0.0 : best->confidence);
-      if (!best->reason.empty()) ++why[best->reason];
+    };
+    // Pairs come in time order: only those near the step are visited.
+    const double half = opt_.smooth_s / 2;
+    const auto first = std::lower_bound(pairs_.begin(), pairs_.end(), mid - half - 1e-9,
+                                        [](const Pair& p, double t) { return p.t_mid < t; });
+    for (auto it = first; it != pairs_.end() && it->t_mid <= mid + half + 1e-9; ++it)
+      if (std::abs(it->t_mid - mid) <= half) take(*it);
+    if (total == 0) {  // a window shorter than the pairs' spacing: the nearest pair (the earlier one on a tie)
+      const auto after = std::lower_bound(pairs_.begin(), pairs_.end(), mid,
+                                          [](const Pair& p, double t) { return p.t_mid < t; });
+      const auto before = after == pairs_.begin() ? after : after - 1;
+      take(after == pairs_.end() || std::abs(before->t_mid - mid) <= std::abs(after->t_mid - mid) ? *before : *after);
     }
     // Known when at least half of the window's pairs are.
     if (2 * int(v.size()) >= total) m.speed[i] = median(v);
