@@ -135,6 +135,46 @@ TEST(Geofence, StrictBoxesAreValidationOnly) {
   EXPECT_THROW(parse_geobox("5,2,3,4"), Error);
 }
 
+// A few real drives beside many procedural ones: the "footage" feature at exponent 1 gives them half of the draws.
+TEST(Balance, FootageWeighsRealDrivesAsMuchAsProceduralOnes) {
+  EpisodeMeta real, synth;
+  real.source = "highway.mp4";
+  synth.source = "synth:seed=1,episode=3";
+  EXPECT_FALSE(real.is_procedural());
+  EXPECT_TRUE(synth.is_procedural());
+  std::vector<FeatureRow> rows;
+  for (int i = 0; i < 1000; ++i) rows.push_back(example_features(i < 30 ? real : synth, {8.f}, {0.f}));
+  EXPECT_EQ(rows[0].cat.at("footage"), "real");
+  EXPECT_EQ(rows[999].cat.at("footage"), "procedural");
+  Balancer b({"footage"}, 1.0, 10);
+  b.fit(rows);
+  auto h = b.histogram("footage", rows);
+  ASSERT_EQ(h.bins.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) EXPECT_NEAR(h.sampled[i], 0.5, 1e-9) << h.bins[i];
+}
+
+// Held out by name (--hold-out): the episode and what derives from it, whatever the geofence or the random draw says;
+// the split file keeps the list, and one written before it existed reads as before.
+TEST(Geofence, EpisodesHeldOutByNameTakeTheirMirrorImagesAlong) {
+  std::vector<EpisodeMeta> eps;
+  for (std::string id : {"a", "a-mirror", "b", "b-cf01", "c"}) {
+    EpisodeMeta m;
+    m.id = id;
+    eps.push_back(m);
+  }
+  Split s = geofence_split(eps, {}, 0.0, 0, {"a", "b"});
+  EXPECT_EQ(s.val_named, (std::vector<std::string>{"a", "a-mirror", "b", "b-cf01"}));
+  EXPECT_EQ(s.train, std::vector<std::string>{"c"});
+  EXPECT_EQ(s.held_out().size(), 4u);
+  Split back = Split::from_json(s.to_json(), "test");
+  EXPECT_EQ(back.val_named, s.val_named);
+  Split old = Split::from_json(nlohmann::json{{"train", {"c"}}, {"val_geofence", nlohmann::json::array()}, {"val_random", {"a"}}}, "old");
+  EXPECT_TRUE(old.val_named.empty());
+  EXPECT_FALSE(geofence_split(eps, {}, 0, 0).to_json().contains("val_named"));
+  const std::string e = test::error_of([&] { geofence_split(eps, {}, 0.0, 0, {"zz"}, "DS"); });
+  EXPECT_NE(e.find("--hold-out zz: DS has no episode of that name"), std::string::npos) << e;
+}
+
 TEST(Mirror, SwapsSidesInWordsAndLabelsButNotIntensifiers) {
   EXPECT_EQ(mirror_words("approaching a left bend, changing lanes to the Right"),
             "approaching a right bend, changing lanes to the Left");

@@ -248,10 +248,16 @@ TEST(DataHardeningCli, IngestRejectsBadFpsAndUnsafeIds) {
     EXPECT_TRUE(has(e, "episode id '" + id + "'")) << id << " -> " << e;
   }
   EXPECT_FALSE(fs::exists(dir / "escape"));
+  // A stated rate must agree with the one the video states (frame times come from its timestamps).
   IngestOptions o = small();
   o.id = "a.b-c_1";
-  o.fps = 1000;
-  EXPECT_EQ(ingest_video(video, dir / "ds", o).meta.fps, 1000);
+  o.fps = 30;
+  std::string e = error_of([&] { ingest_video(video, dir / "ds", o); });
+  EXPECT_TRUE(has(e, "--fps 30 does not match the 25 fps")) << e;
+  EXPECT_TRUE(has(e, "clip.avi")) << e;
+  EXPECT_FALSE(fs::exists(dir / "ds" / "episodes" / "a.b-c_1"));
+  o.fps = 25;
+  EXPECT_EQ(ingest_video(video, dir / "ds", o).meta.fps, 25);
 
   // The app: one error line naming --fps and the range, for 0 too (the library's "not given").
   for (std::string v : {"0", "=-5", "1e9", "nan"}) {

@@ -1,12 +1,16 @@
 // Evaluation probes: Frechet distance and Spearman against closed forms, shapes, learning on procedural data,
-// exact resume through the CLI, and bad inputs.
+// exact resume through the CLI, the realism probe on real and procedural episodes, and bad inputs.
 #include <algorithm>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
 #include <torch/torch.h>
 
 #include "gaia/core/safetensors.h"
 #include "gaia/data/frame_set.h"
+#include "gaia/data/video_io.h"
 #include "gaia/world/batch.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/probe.h"
@@ -259,4 +263,91 @@ TEST(ProbeCli, EvalOnDrivesTooShortForTheProbeIsOneLine) {
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
   EXPECT_NE(r.output.find("no held-out episode is long enough for this probe"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find((d / "ds").string()), std::string::npos) << r.output;
+}
+
+namespace {
+
+// A "camera" clip: a sensor-noise texture with a bright band that moves, nothing like the procedural world's flat
+// shading. Written as MJPEG (FFmpeg always has it) at 25 fps.
+fs::path camera_clip(const fs::path& p, int frames, int seed) {
+  cv::VideoWriter vw(p.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25.0, cv::Size(128, 64));
+  if (!vw.isOpened()) return {};
+  cv::RNG rng(static_cast<uint64_t>(seed) + 1);
+  for (int i = 0; i < frames; ++i) {
+    cv::Mat f(64, 128, CV_8UC3);
+    rng.fill(f, cv::RNG::NORMAL, cv::Scalar(110, 120, 130), cv::Scalar(45, 45, 45));
+    cv::rectangle(f, cv::Rect((i * 5 + seed * 17) % 128, 0, 12, 64), cv::Scalar(230, 230, 230), cv::FILLED);
+    vw.write(f);
+  }
+  return p;
+}
+
+}  // namespace
+
+// The realism probe: trained on one dataset of real (ingested) and procedural (gaia synth) episodes, half of each
+// batch from each, it tells the held-out clip from held-out procedural drives; `gaia probe read` reads a video and a
+// rollout; a dataset whose training episodes are all of one kind is one error line.
+TEST(ProbeCli, RealismTellsRealFootageFromProcedural) {
+  test::TempDir d;
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  auto r = test::run_gaia("synth --episodes 4 --seconds 2 --size 32x64 --seed 9 --out " + q(d / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (int i = 0; i < 3; ++i) {
+    const fs::path clip = camera_clip(d / fmt::format("cam{}.avi", i), 30, i);
+    ASSERT_FALSE(clip.empty());
+    r = test::run_gaia("ingest " + q(clip) + tiny + " --id cam" + std::to_string(i) + " --out " + q(d / "ds"));
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  // Leave one clip out (and one procedural drive, so both kinds are scored).
+  r = test::run_gaia("data split " + q(d / "ds") + " --hold-out cam2 --hold-out synth-s9-e00003" + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("2 named"), std::string::npos) << r.output;
+  r = test::run_gaia("probe train realism " + q(d / "ds") + tiny + " --steps 60 --batch-size 16 --val-every 60 --out " +
+                     q(d / "real"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fs::path w = d / "real" / "probe-realism.safetensors";
+  ASSERT_TRUE(fs::exists(w));
+  r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(w) + tiny + " --examples 40");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(j.at("real_examples").get<int>(), 20);  // half of the 40 from the held-out clip
+  EXPECT_EQ(j.at("procedural_examples").get<int>(), 20);
+  EXPECT_GE(j.at("real_read_as_real").get<double>(), 0.9) << j;
+  EXPECT_LE(j.at("procedural_read_as_real").get<double>(), 0.1) << j;
+
+  // probe read: the held-out clip reads as real; a procedural drive's frames (as a video) do not.
+  r = test::run_gaia("probe read " + q(d / "cam2.avi") + " --probe " + q(w) + tiny + " --out " + q(d / "read"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  j = nlohmann::json::parse(read_file(d / "read" / "probe_read.json"));
+  EXPECT_EQ(j.at("frames").get<int>(), 30);
+  EXPECT_GE(j.at("read_as_real").get<double>(), 0.9) << j;
+  std::vector<cv::Mat> synth_frames;
+  {
+    data::Dataset ds(d / "ds");
+    auto set = data::frame_set(ds, {"synth-s9-e00003"}, 0, 20);
+    for (auto& f : set.frames) synth_frames.push_back(set.episodes[f.episode]->frame_bgr(f.frame));
+  }
+  data::write_video(d / "synth.mp4", synth_frames, 25);
+  r = test::run_gaia("probe read " + q(d / "synth.mp4") + " --probe " + q(w) + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_LE(j.at("read_as_real").get<double>(), 0.2) << j;
+
+  // A rollout's tokens need a tokenizer to be read; a dynamics probe reads no single frames.
+  r = test::run_gaia("probe read " + q(w) + " --probe " + q(w) + tiny);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("give --tokenizer"), std::string::npos) << r.output;
+  r = test::run_gaia("probe read " + q(d / "cam2.avi") + " --probe " +
+                     q(test::source_dir() / "models" / "probe-dynamics.safetensors") + tiny);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("is a dynamics probe"), std::string::npos) << r.output;
+
+  // Every real clip held out: nothing real to learn from.
+  r = test::run_gaia("data split " + q(d / "ds") + " --hold-out cam0 --hold-out cam1 --hold-out cam2" + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe train realism " + q(d / "ds") + tiny + " --steps 2 --out " + q(d / "none"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find("needs real and procedural episodes"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "none" / "probe-realism.safetensors"));
 }

@@ -1,6 +1,7 @@
 // Token files of other tokenizers (world/token_file.h): dtypes, 2-D arrays with a stated grid, K, frame rates,
 // safetensors, a single file split in time and a directory of files as episodes.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -11,6 +12,7 @@
 #include "gaia/core/fs.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/data/geofence.h"
 #include "gaia/world/token_dataset.h"
 #include "gaia/world/token_file.h"
 #include "test_util.h"
@@ -202,6 +204,85 @@ TEST(TokenFile, ADirectoryOfFilesIsADatasetHeldOutByFile) {
   EXPECT_NE(err.find("outside [0, 512)"), std::string::npos) << err;
   fs::create_directories(dir / "empty");
   EXPECT_NE(test::error_of([&] { TokenDataset(dir / "empty"); }).find("no .npy or .safetensors"), std::string::npos);
+}
+
+// A sidecar X.json gives what the file cannot say: the drive's place (for balancing and the geofenced split) and
+// its frame rate; a stated rate that disagrees, an unknown key and a bad value are one error naming the sidecar.
+TEST(TokenFile, SidecarsGivePlaceAndRateAndAreChecked) {
+  test::TempDir dir;
+  fs::create_directories(dir / "drives");
+  for (int i = 0; i < 4; ++i) write_comma(dir / "drives" / fmt::format("d{}.npy", i), 80, DType::I16);
+  write_file_atomic(dir / "drives" / "d1.json", R"({"latitude": 48.1, "longitude": 11.5, "weather": "rain", "fps": 20})");
+  write_file_atomic(dir / "drives" / "d2.json", R"({"latitude": 48.9, "longitude": 8.4, "fps": 10})");
+  TokenFormat unstated = comma_format();
+  unstated.rate_hz = 0;  // the rate comes from each sidecar (files without one are at the world model's rate)
+  TokenDataset ds(dir / "drives", unstated);
+  EXPECT_EQ(ds.steps(0), 80);  // no sidecar: already at 6.25 Hz
+  EXPECT_EQ(ds.steps(1), 25);  // 20 fps: every 3.2th frame
+  EXPECT_EQ(ds.steps(2), 50);  // 10 fps: every 1.6th
+  EXPECT_EQ(ds.episode(1)->tokens[128 + 9], comma_id(3, 9));
+  EXPECT_EQ(ds.meta(1).weather, "rain");
+  EXPECT_DOUBLE_EQ(ds.meta(2).longitude, 8.4);
+  EXPECT_TRUE(std::isnan(ds.meta(0).latitude));
+  // A geofence around d2's position holds it out; d1 trains.
+  auto s = data::geofence_split({ds.meta(0), ds.meta(1), ds.meta(2), ds.meta(3)}, {data::parse_geobox("48.5,8,49.5,9")},
+                                0.0, 0, {"d3"});
+  EXPECT_EQ(s.val_geofence, std::vector<std::string>{"d2"});
+  EXPECT_EQ(s.val_named, std::vector<std::string>{"d3"});
+  EXPECT_EQ(s.train, (std::vector<std::string>{"d0", "d1"}));
+
+  // --token-fps 20 agrees with d1 but not with d2.
+  auto err = test::error_of([&] { TokenDataset(dir / "drives", comma_format()); });
+  EXPECT_NE(err.find("d2.npy: --token-fps 20 does not match the 10 fps its sidecar d2.json states"), std::string::npos) << err;
+  // --keep-rate trains at one rate: files of 20 and 10 fps cannot share it.
+  TokenFormat keep = unstated;
+  keep.keep_rate = true;
+  err = test::error_of([&] { TokenDataset(dir / "drives", keep); });
+  EXPECT_NE(err.find("--keep-rate trains at one rate"), std::string::npos) << err;
+  write_file_atomic(dir / "drives" / "d2.json", R"({"latitude": 48.9, "longitude": 8.4, "speed": 3})");
+  err = test::error_of([&] { TokenDataset(dir / "drives", unstated); });
+  EXPECT_NE(err.find("d2.json: unknown key 'speed'"), std::string::npos) << err;
+  write_file_atomic(dir / "drives" / "d2.json", R"({"latitude": 148.9, "longitude": 8.4})");
+  err = test::error_of([&] { TokenDataset(dir / "drives", unstated); });
+  EXPECT_NE(err.find("d2.json: 'latitude' must be a number in [-90, 90]"), std::string::npos) << err;
+  write_file_atomic(dir / "drives" / "d2.json", R"({"latitude": 48.9})");
+  err = test::error_of([&] { TokenDataset(dir / "drives", unstated); });
+  EXPECT_NE(err.find("give latitude and longitude together"), std::string::npos) << err;
+  write_file_atomic(dir / "drives" / "d2.json", "[1, 2");
+  err = test::error_of([&] { TokenDataset(dir / "drives", unstated); });
+  EXPECT_NE(err.find("d2.json"), std::string::npos) << err;
+}
+
+// `gaia data split` on a directory of token files: geofenced from the sidecars, --hold-out by stem; world train
+// then validates on exactly those files.
+TEST(TokenFileCli, DataSplitGeofencesTokenFilesFromTheirSidecars) {
+  test::TempDir dir;
+  fs::create_directories(dir / "drives");
+  for (int i = 0; i < 5; ++i) {
+    write_comma(dir / "drives" / fmt::format("d{}.npy", i), 200, DType::I16);
+    write_file_atomic(dir / "drives" / fmt::format("d{}.json", i),
+                      fmt::format(R"({{"latitude": {}, "longitude": 8.4, "fps": 20}})", 48.0 + 0.5 * i));
+  }
+  const std::string tiny = " --config " + test::q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  auto r = test::run_gaia("data split " + test::q(dir / "drives") + " --grid 8x16 --geofence 48.9,8,49.6,9 --hold-out d0" + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto split = data::read_split(dir / "drives" / "split.json");
+  EXPECT_EQ(split.val_geofence, (std::vector<std::string>{"d2", "d3"}));
+  EXPECT_EQ(split.val_named, std::vector<std::string>{"d0"});
+  EXPECT_EQ(split.train, (std::vector<std::string>{"d1", "d4"}));
+  r = test::run_gaia("world train " + test::q(dir / "drives") + " --grid 8x16 --codebook-size 1024" + tiny +
+                     " --steps 2 --val-every 2 --out " + test::q(dir / "run"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("validation skipped"), std::string::npos) << r.output;
+  // A name that is no file, and a split that leaves nothing to train on, are one line each; split.json is kept.
+  const std::string before = read_file(dir / "drives" / "split.json");
+  r = test::run_gaia("data split " + test::q(dir / "drives") + " --grid 8x16 --hold-out d9" + tiny);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--hold-out d9"), std::string::npos) << r.output;
+  r = test::run_gaia("data split " + test::q(dir / "drives") + " --grid 8x16 --geofence 40,0,50,10" + tiny);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("leaves no episode to train on"), std::string::npos) << r.output;
+  EXPECT_EQ(read_file(dir / "drives" / "split.json"), before);
 }
 
 TEST(TokenFileCli, CommaVqMinuteTrainsWithValidationAndRefusesSteering) {

@@ -8,12 +8,14 @@
 
 #include "common.h"
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/data/balance.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/geofence.h"
 #include "gaia/data/motion.h"
 #include "gaia/core/progress.h"
 #include "gaia/eval/svg_plot.h"
+#include "gaia/world/token_dataset.h"
 
 namespace gaia::app {
 
@@ -128,25 +130,41 @@ void register_data(CLI::App& app) {
   }
 
   {
-    auto* cmd = data_cmd->add_subcommand("split", "geofenced validation split (paper §3) written as JSON");
+    auto* cmd = data_cmd->add_subcommand("split", "geofenced validation split (paper §3) written as JSON, for an "
+                                         "episode dataset, a token dataset or a directory of token files");
     auto flags = std::make_shared<SharedFlags>();
     auto root = std::make_shared<std::string>();
-    auto boxes = std::make_shared<std::vector<std::string>>();
+    auto boxes = std::make_shared<std::vector<std::string>>(), named = std::make_shared<std::vector<std::string>>();
     auto frac = std::make_shared<double>(0.0);
-    cmd->add_option("DATASET", *root, "dataset directory")->required();
+    auto format = std::make_shared<TokenFormatFlags>();
+    cmd->add_option("DATASET", *root, "episode dataset, token dataset (gaia tokenize) or directory of token files "
+                    "(positions from their sidecar X.json)")->required();
     cmd->add_option("--geofence", *boxes, "strict validation box lat_min,lon_min,lat_max,lon_max (repeatable)");
+    cmd->add_option("--hold-out", *named, "hold out this episode (or token file stem) and its mirror images and "
+                    "replays (repeatable): e.g. one clip for a leave-one-out measurement");
     cmd->add_option("--val-fraction", *frac, "fraction of the other episodes held out at random");
+    add_token_format_flags(cmd, format.get());
     add_shared_flags(cmd, flags.get(), "split JSON file (default: DATASET/split.json)");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
-      data::Dataset ds(*root);
       std::vector<data::GeoBox> gb;
       for (auto& b : *boxes) gb.push_back(data::parse_geobox(b));
-      auto s = data::geofence_split(ds, gb, *frac, c.run.seed);
+      std::vector<data::EpisodeMeta> metas;
+      const fs::path header = fs::path(*root) / "dataset.json";
+      if (fs::exists(header) && read_json(header).value("format", "") == "gaia-episodes") {
+        data::Dataset ds(*root);
+        for (size_t i = 0; i < ds.size(); ++i) metas.push_back(ds.meta(i));
+      } else {
+        world::TokenDataset ds(*root, token_format(*format, c, false));
+        if (ds.bare()) fail("{}: a single token file is split in time (its last tenth); split a directory of them", *root);
+        for (size_t e = 0; e < ds.size(); ++e) metas.push_back(ds.meta(e));
+      }
+      auto s = data::geofence_split(metas, gb, *frac, c.run.seed, *named, *root);
+      if (s.train.empty()) fail("{}: this split leaves no episode to train on", *root);
       fs::path out = flags->out.empty() ? fs::path(*root) / "split.json" : fs::path(flags->out);
       write_file_atomic(out, s.to_json().dump(2) + "\n");
-      std::printf("train %zu, validation %zu inside geofences + %zu random -> %s\n", s.train.size(),
-                  s.val_geofence.size(), s.val_random.size(), out.c_str());
+      std::printf("train %zu, validation %zu inside geofences + %zu named + %zu random -> %s\n", s.train.size(),
+                  s.val_geofence.size(), s.val_named.size(), s.val_random.size(), out.c_str());
     });
   }
 

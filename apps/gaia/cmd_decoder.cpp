@@ -28,30 +28,6 @@ namespace gaia::app {
 
 namespace {
 
-// Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
-// dataset episode directory (its tokens.npy) -> int64 [F, N, h, w].
-torch::Tensor read_tokens(const fs::path& p) {
-  torch::Tensor t;
-  if (!fs::exists(p)) fail("{}: no such file or directory", p.string());
-  if (fs::is_directory(p)) {
-    if (!fs::exists(p / "tokens.npy")) fail("{}: not a token episode (no tokens.npy)", p.string());
-    return read_tokens(p / "tokens.npy");
-  }
-  if (p.extension() == ".npy") {
-    NpyArray a = npy_read(p);
-    auto v = a.to_int64();
-    t = torch::tensor(v, torch::kLong).view(a.shape);
-  } else {
-    SafetensorsFile f(p);
-    if (!f.contains("tokens")) fail("{}: no 'tokens' tensor (expected a gaia generate rollout)", p.string());
-    t = tensor_from_view(f.get("tokens")).to(torch::kLong);
-  }
-  if (t.dim() == 3) t = t.unsqueeze(0);
-  if (t.dim() != 4) fail("{}: tokens must be [frames, h, w] or [futures, frames, h, w], got {} dimensions", p.string(), t.dim());
-  if (t.size(1) == 0 || t.size(0) == 0) fail("{}: the token file is empty (0 frames)", p.string());
-  return t;
-}
-
 // [F, M, 3, H, W] in [-1, 1] -> M frames with the futures side by side.
 std::vector<int> parse_steps(const std::string& s) {
   std::vector<int> out;

@@ -29,7 +29,7 @@ void register_ingest(CLI::App& app) {
                   "(default 0: they start together)")->check(number_in({-1e9, 1e9}));
   cmd->add_option("--meta", *metas, "episode metadata key=value: weather, time_of_day, latitude, longitude, source, ...");
   cmd->add_option("--id", opt->id, "episode id (default: the video's file name)");
-  cmd->add_option("--fps", opt->fps, "frame rate (required for image directories; overrides the container)")
+  cmd->add_option("--fps", opt->fps, "frame rate (required for image directories and videos that state none; must match the rate a video states)")
       ->check(number_in({0, data::kMaxIngestFps, true, false}));
   cmd->add_option("--codec", opt->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
   cmd->add_option("--max-frames", opt->max_frames, "stop after this many frames (0 = all)");

@@ -9,9 +9,12 @@
 #include <cmath>
 #include <regex>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/core/npy.h"
+#include "gaia/core/safetensors.h"
 #include "gaia/data/motion.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
@@ -133,7 +136,6 @@ world::TokenFormat token_format(const TokenFormatFlags& f, const Config& c, bool
   t.rate_hz = f.token_fps;
   t.keep_rate = f.keep_rate;
   t.world_rate_hz = (info ? info->config : c).data.world_fps;
-  if (f.keep_rate && f.token_fps <= 0) fail("--keep-rate needs --token-fps (the files' own frame rate)");
   if (info) {
     if (t.grid_h > 0 && (t.grid_h != info->grid_h || t.grid_w != info->grid_w))
       fail("--grid {}: the world model was trained on a {}x{} grid", f.grid, info->grid_h, info->grid_w);
@@ -197,6 +199,34 @@ void check_numbers(CLI::App& app) { check_numbers_of(&app); }
 void apply_threads(const Config& c) {
   if (c.run.threads > 0) cv::setNumThreads(c.run.threads);
   set_torch_threads(c.run.threads);
+}
+
+torch::Tensor read_tokens(const fs::path& p, int64_t* prompt_frames) {
+  torch::Tensor t;
+  if (prompt_frames) *prompt_frames = 0;
+  if (!fs::exists(p)) fail("{}: no such file or directory", p.string());
+  if (fs::is_directory(p)) {
+    if (!fs::exists(p / "tokens.npy")) fail("{}: not a token episode (no tokens.npy)", p.string());
+    return read_tokens(p / "tokens.npy");
+  }
+  if (p.extension() == ".npy") {
+    NpyArray a = npy_read(p);
+    auto v = a.to_int64();
+    t = torch::tensor(v, torch::kLong).view(a.shape);
+  } else {
+    SafetensorsFile f(p);
+    if (!f.contains("tokens")) fail("{}: no 'tokens' tensor (expected a gaia generate rollout)", p.string());
+    t = tensor_from_view(f.get("tokens")).to(torch::kLong);
+    auto md = f.metadata();
+    if (prompt_frames && md.count("gaia.rollout")) {
+      auto j = nlohmann::json::parse(md["gaia.rollout"], nullptr, false);
+      if (j.is_object()) *prompt_frames = j.value("prompt_frames", int64_t(0));
+    }
+  }
+  if (t.dim() == 3) t = t.unsqueeze(0);
+  if (t.dim() != 4) fail("{}: tokens must be [frames, h, w] or [futures, frames, h, w], got {} dimensions", p.string(), t.dim());
+  if (t.size(1) == 0 || t.size(0) == 0) fail("{}: the token file is empty (0 frames)", p.string());
+  return t;
 }
 
 }  // namespace gaia::app

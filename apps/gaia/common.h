@@ -5,6 +5,7 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <torch/torch.h>
 
 #include "gaia/config.h"
 
@@ -99,6 +100,11 @@ int run_gaia_child(const std::vector<std::string>& args);
 
 // The exact command line of this run (set by main), recorded in reports so that every figure can be remade.
 extern std::string g_command_line;
+
+// Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
+// dataset episode directory (its tokens.npy) -> int64 [F, N, h, w]. `prompt_frames` (when given) gets the rollout's
+// prompt length from its metadata (0 for other files).
+torch::Tensor read_tokens(const fs::path& p, int64_t* prompt_frames = nullptr);
 
 // Registration of the subcommands (one file each).
 void register_plan(CLI::App& app);

@@ -12,7 +12,7 @@ namespace gaia::data {
 namespace {
 constexpr double kStraight = 0.002;  // |curvature| below 1/500 m counts as driving straight
 const std::vector<std::string> kNumeric{"latitude", "longitude", "speed", "curvature"};
-const std::vector<std::string> kCategorical{"weather", "time_of_day", "steering", "speed_category"};
+const std::vector<std::string> kCategorical{"weather", "time_of_day", "steering", "speed_category", "footage"};
 
 bool is_numeric(const std::string& f) { return std::find(kNumeric.begin(), kNumeric.end(), f) != kNumeric.end(); }
 
@@ -52,6 +52,7 @@ FeatureRow example_features(const EpisodeMeta& m, const std::vector<float>& spee
   FeatureRow r;
   r.cat["weather"] = m.weather.empty() ? "missing" : m.weather;
   r.cat["time_of_day"] = m.time_of_day.empty() ? "missing" : m.time_of_day;
+  r.cat["footage"] = m.is_procedural() ? "procedural" : "real";
   r.num["latitude"] = m.latitude;
   r.num["longitude"] = m.longitude;
   double v = mean_present(speeds), k = mean_present(curvatures);

@@ -21,7 +21,8 @@ struct FeatureRow {
 
 // Features a clip offers: weather, time_of_day (categorical); latitude, longitude, speed (mean m/s),
 // curvature (mean 1/m) (numeric); steering (left/straight/right) and speed_category (stopped/slow/medium/fast)
-// as behaviour categories.
+// as behaviour categories; footage (real/procedural), so that a few real drives can weigh as much as many synthetic
+// ones (`--set data.balance_tokenizer=[footage] --set data.balance_exponent=1`: half of each batch real).
 FeatureRow clip_features(const Episode& ep, const std::vector<int64_t>& frames);
 // The same features from an episode's metadata and the speeds / curvatures of the example's steps (NaN = missing):
 // clips of frames and world-model windows of token steps share one definition of "left" or "fast".

@@ -58,6 +58,9 @@ struct EpisodeMeta {
     return false;
   }
   bool is_replay() const { return extra.count(kReplayOfKey) > 0; }
+  // Frames rendered by `gaia synth` (or replayed from its drives) rather than recorded by a camera: the "footage"
+  // feature of balancing and the label of the realism probe.
+  bool is_procedural() const { return source.rfind("synth:", 0) == 0; }
 };
 
 // Per-frame record handed to the writer. Frames are BGR CV_8UC3 (OpenCV's convention) of the episode's size.

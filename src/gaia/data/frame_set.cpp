@@ -19,6 +19,13 @@ FrameSet frame_set(const Dataset& ds, const std::vector<std::string>& ids, int m
   return s;
 }
 
+FrameSet merge(FrameSet a, FrameSet b) {
+  const size_t offset = a.episodes.size();
+  for (auto& e : b.episodes) a.episodes.push_back(std::move(e));
+  for (auto r : b.frames) a.frames.push_back({r.episode + offset, r.frame});
+  return a;
+}
+
 std::vector<std::string> held_out_ids(const Dataset& ds, uint64_t seed) {
   auto ids = load_or_default_split(ds, 0.1, seed).held_out();
   return ids.empty() ? ds.ids() : ids;

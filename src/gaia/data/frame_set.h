@@ -23,6 +23,8 @@ struct FrameSet {
 // The episodes `ids`, and n frames evenly spaced over all their frames taken together (every frame if n <= 0).
 // `margin` frames at the end of each episode are left out (for inputs that reach `margin` frames ahead).
 FrameSet frame_set(const Dataset& ds, const std::vector<std::string>& ids, int margin, int n);
+// Both sets in one: b's episodes after a's, its frames renumbered to match.
+FrameSet merge(FrameSet a, FrameSet b);
 // The held-out episodes of the dataset's split (data/geofence.h), or every episode when none is held out.
 std::vector<std::string> held_out_ids(const Dataset& ds, uint64_t seed);
 // The same over the held-out episodes of the dataset's split (data/geofence.h), or every episode when none is held out.

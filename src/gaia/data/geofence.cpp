@@ -32,12 +32,15 @@ GeoBox parse_geobox(const std::string& s) {
 
 std::vector<std::string> Split::held_out() const {
   std::vector<std::string> ids = val_geofence;
+  ids.insert(ids.end(), val_named.begin(), val_named.end());
   ids.insert(ids.end(), val_random.begin(), val_random.end());
   return ids;
 }
 
 nlohmann::json Split::to_json() const {
-  return {{"train", train}, {"val_geofence", val_geofence}, {"val_random", val_random}};
+  nlohmann::json j = {{"train", train}, {"val_geofence", val_geofence}, {"val_random", val_random}};
+  if (!val_named.empty()) j["val_named"] = val_named;  // files written before it existed stay byte-identical
+  return j;
 }
 
 Split Split::from_json(const nlohmann::json& j, const std::string& where) {
@@ -46,28 +49,41 @@ Split Split::from_json(const nlohmann::json& j, const std::string& where) {
     s.train = j.at("train").get<std::vector<std::string>>();
     s.val_geofence = j.at("val_geofence").get<std::vector<std::string>>();
     s.val_random = j.at("val_random").get<std::vector<std::string>>();
+    if (j.contains("val_named")) s.val_named = j.at("val_named").get<std::vector<std::string>>();
   } catch (const nlohmann::json::exception& e) {
     fail("{}: bad split file ({})", where, e.what());
   }
   return s;
 }
 
-Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double frac, uint64_t seed) {
+Split geofence_split(const std::vector<EpisodeMeta>& episodes, const std::vector<GeoBox>& strict, double frac,
+                     uint64_t seed, const std::vector<std::string>& named, const std::string& where) {
   if (!(frac >= 0 && frac < 1)) fail("validation fraction must be in [0, 1), got {}", frac);
+  for (const auto& n : named) {
+    bool found = false;
+    for (const auto& m : episodes) found = found || split_source_id(m.id) == n || m.id == n;
+    if (!found) fail("--hold-out {}: {} has no episode of that name", n, where.empty() ? "the dataset" : where);
+  }
   Split s;
-  for (size_t i = 0; i < ds.size(); ++i) {
-    EpisodeMeta m = ds.meta(i);
+  for (const auto& m : episodes) {
     bool fenced = false;
     if (m.has_location())
       for (auto& b : strict) fenced = fenced || b.contains(m.latitude, m.longitude);
-    if (fenced) {
-      s.val_geofence.push_back(m.id);
-      continue;
-    }
-    if (held_out_at_random(m.id, frac, seed)) s.val_random.push_back(m.id);
+    const bool by_name = std::find(named.begin(), named.end(), m.id) != named.end() ||
+                         std::find(named.begin(), named.end(), split_source_id(m.id)) != named.end();
+    if (fenced) s.val_geofence.push_back(m.id);
+    else if (by_name) s.val_named.push_back(m.id);
+    else if (held_out_at_random(m.id, frac, seed)) s.val_random.push_back(m.id);
     else s.train.push_back(m.id);
   }
   return s;
+}
+
+Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double frac, uint64_t seed,
+                     const std::vector<std::string>& named) {
+  std::vector<EpisodeMeta> metas;
+  for (size_t i = 0; i < ds.size(); ++i) metas.push_back(ds.meta(i));
+  return geofence_split(metas, strict, frac, seed, named, ds.root().string());
 }
 
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {

@@ -21,15 +21,22 @@ struct GeoBox {
 GeoBox parse_geobox(const std::string& s);  // "lat_min,lon_min,lat_max,lon_max"
 
 struct Split {
-  std::vector<std::string> train, val_geofence, val_random;
-  // Every held-out episode: the geofenced ones first, then the random hold-out.
+  // val_named: held out by name (`gaia data split --hold-out ID`, e.g. one clip for a leave-one-out measurement).
+  std::vector<std::string> train, val_geofence, val_random, val_named;
+  // Every held-out episode: the geofenced ones first, then those held out by name, then the random hold-out.
   std::vector<std::string> held_out() const;
   nlohmann::json to_json() const;
   static Split from_json(const nlohmann::json& j, const std::string& where);
 };
 
-// Episodes without a location are never geofenced; random hold-out is seeded and independent of order.
-Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed);
+// Episodes without a location are never geofenced; random hold-out is seeded and independent of order. `named`
+// episodes (and the mirror images and replays derived from them) are held out whatever their place; a name that
+// matches no episode is an error.
+Split geofence_split(const std::vector<EpisodeMeta>& episodes, const std::vector<GeoBox>& strict,
+                     double random_val_fraction, uint64_t seed, const std::vector<std::string>& named = {},
+                     const std::string& where = "");
+Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, double random_val_fraction, uint64_t seed,
+                     const std::vector<std::string>& named = {});
 
 // The random hold-out decision for one episode: a hash of (seed, id), so it does not change when episodes are added.
 // An episode derived from another hashes its source's id (split_source_id): it is held out exactly when its source

@@ -75,6 +75,11 @@ VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path
   cap_ = std::make_unique<cv::VideoCapture>(path.string(), cv::CAP_FFMPEG);
   if (!cap_->isOpened()) fail("{}: cannot open video (not a format FFmpeg decodes, or truncated or corrupt)", path.string());
   double fps = cap_->get(cv::CAP_PROP_FPS);
+  // Frame times come from the container's timestamps where it has them, so a stated rate that disagrees would be
+  // half applied: refuse it rather than guess which one is right.
+  if (fps_override > 0 && fps > 0 && fps <= 1000 && std::abs(fps_override - fps) > 0.01 * fps)
+    fail("{}: --fps {:.4g} does not match the {:.4g} fps the video states; leave --fps out (it is for image "
+         "directories and videos that state no rate)", path.string(), fps_override, fps);
   fps_ = fps_override > 0 ? fps_override : fps;
   if (!(fps_ > 0) || fps_ > 1000) fail("{}: video reports no usable frame rate; pass --fps", path.string());
   // Streams without an index report 0, a negative or a garbage count: treat anything implausible as "none".

@@ -8,10 +8,13 @@ namespace gaia::probe {
 ProbeKind parse_kind(const std::string& s) {
   if (s == "dynamics") return ProbeKind::kDynamics;
   if (s == "scene") return ProbeKind::kScene;
-  fail("probe kind '{}' is not one of: dynamics, scene", s);
+  if (s == "realism") return ProbeKind::kRealism;
+  fail("probe kind '{}' is not one of: dynamics, scene, realism", s);
 }
 
-std::string to_string(ProbeKind k) { return k == ProbeKind::kDynamics ? "dynamics" : "scene"; }
+std::string to_string(ProbeKind k) {
+  return k == ProbeKind::kDynamics ? "dynamics" : k == ProbeKind::kScene ? "scene" : "realism";
+}
 
 const std::vector<std::string>& weather_classes() {
   static const std::vector<std::string> v{"clear", "overcast", "rain", "fog", "snow"};
@@ -33,7 +36,7 @@ int class_index(const std::vector<std::string>& classes, const std::string& name
 
 ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t n, int64_t width)
     : kind(k), frames(n > 0 ? n : (k == ProbeKind::kDynamics ? kDynamicsFrames : 1)) {
-  if (kind == ProbeKind::kScene && frames != 1) fail("scene probe: reads one frame, not {}", frames);
+  if (kind != ProbeKind::kDynamics && frames != 1) fail("{} probe: reads one frame, not {}", to_string(kind), frames);
   if (kind == ProbeKind::kDynamics && frames < 2) fail("dynamics probe: needs at least 2 frames, got {}", frames);
   // Four stride-2 stages (72x128 -> 5x8), GroupNorm + SiLU, then the global average: small enough to train in
   // minutes on a CPU, deep enough to see lane markings move and the colour of a traffic light.
@@ -49,7 +52,8 @@ ProbeNetImpl::ProbeNetImpl(ProbeKind k, int64_t n, int64_t width)
     body->push_back(torch::nn::SiLU());
   }
   register_module("body", body);
-  head = register_module("head", torch::nn::Linear(width, kind == ProbeKind::kDynamics ? 2 : kSceneLogits));
+  const int64_t outputs = kind == ProbeKind::kDynamics ? 2 : kind == ProbeKind::kScene ? kSceneLogits : 1;
+  head = register_module("head", torch::nn::Linear(width, outputs));
 }
 
 torch::Tensor ProbeNetImpl::features(const torch::Tensor& x) {

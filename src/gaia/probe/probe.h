@@ -4,6 +4,8 @@
 //   dynamics  K >= 2 frames 0.16 s apart (steps at 6.25 Hz) -> the ego's mean speed and curvature over them; a
 //             longer window sees the heading change and the lateral drift that one step of gentle steering hides
 //   scene     one frame -> weather, time of day, traffic-light state, whether a lead vehicle is close
+//   realism   one frame -> whether it is real camera footage or the procedural world (trained on a dataset that holds
+//             both); the share of generated frames it reads as real says how far rollouts of real prompts stay real
 // Their penultimate features give a Frechet distance between sets of clips ("FD-probe"; it is not FVD: the
 // features come from our probes trained on our procedural world, not from an I3D network trained on Kinetics).
 #include <string>
@@ -13,8 +15,8 @@
 
 namespace gaia::probe {
 
-enum class ProbeKind { kDynamics, kScene };
-ProbeKind parse_kind(const std::string& s);  // "dynamics" | "scene"
+enum class ProbeKind { kDynamics, kScene, kRealism };
+ProbeKind parse_kind(const std::string& s);  // "dynamics" | "scene" | "realism"
 std::string to_string(ProbeKind k);
 
 // Class names of the scene attributes (the synth labels' vocabularies).
@@ -34,7 +36,8 @@ struct ProbeNetImpl : torch::nn::Module {
   explicit ProbeNetImpl(ProbeKind kind, int64_t frames = 0, int64_t width = 128);
   torch::Tensor features(const torch::Tensor& x);
   // dynamics: [B, 2] normalised (speed / kSpeedScale, curvature / kCurvatureScale);
-  // scene: logits concatenated [B, 5 + 3 + 4 + 2] (weather | time | light | lead close).
+  // scene: logits concatenated [B, 5 + 3 + 4 + 2] (weather | time | light | lead close); realism: [B, 1], the logit
+  // of "real footage".
   torch::Tensor forward(const torch::Tensor& x) { return head(features(x)); }
   int64_t in_frames() const { return frames; }
 

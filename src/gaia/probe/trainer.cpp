@@ -1,5 +1,6 @@
 #include "gaia/probe/trainer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -86,6 +87,11 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
     }
     return torch::tensor(v).view({int64_t(ex.size()), 2});
   }
+  if (kind == ProbeKind::kRealism) {
+    std::vector<float> v;
+    for (const auto& e : ex) v.push_back(eps.at(e.episode)->meta().is_procedural() ? 0.f : 1.f);
+    return torch::tensor(v).view({int64_t(ex.size()), 1});
+  }
   std::vector<int64_t> v;
   for (const auto& e : ex) {
     const auto& ep = *eps.at(e.episode);
@@ -123,6 +129,7 @@ namespace {
 
 torch::Tensor loss_of(ProbeKind kind, const torch::Tensor& out, const torch::Tensor& y) {
   if (kind == ProbeKind::kDynamics) return F::mse_loss(out, y);
+  if (kind == ProbeKind::kRealism) return F::binary_cross_entropy_with_logits(out, y);
   auto heads = split_scene_logits(out);
   torch::Tensor l = torch::zeros({}, out.options());
   for (size_t k = 0; k < heads.size(); ++k) l = l + F::cross_entropy(heads[k], y.select(1, int64_t(k)));
@@ -137,6 +144,17 @@ std::vector<double> col(const torch::Tensor& t, int64_t c, double scale) {
 }
 
 }  // namespace
+
+ExampleSet footage_balanced_set(const data::Dataset& ds, const std::vector<std::string>& ids, int n) {
+  std::vector<std::string> real, procedural;
+  for (const auto& id : ids) {
+    auto idx = data::episode_indices(ds, {id});
+    (ds.meta(idx.at(0)).is_procedural() ? procedural : real).push_back(id);
+  }
+  const int half = n > 0 ? std::max(1, n / 2) : 0;
+  auto a = data::frame_set(ds, real, 0, half), b = data::frame_set(ds, procedural, 0, n > 0 ? n - half : 0);
+  return data::merge(std::move(a), std::move(b));
+}
 
 nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& y) {
   nlohmann::json j;
@@ -162,6 +180,17 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
     j["steering_examples"] = steer;
     return j;
   }
+  if (kind == ProbeKind::kRealism) {
+    auto real = y.select(1, 0) > 0.5, read_real = pred.select(1, 0) > 0;
+    const int64_t n_real = real.sum().item<int64_t>(), n_proc = y.size(0) - n_real;
+    j["accuracy"] = read_real.eq(real).to(torch::kFloat64).mean().item<double>();
+    j["real_examples"] = n_real;
+    j["procedural_examples"] = n_proc;
+    // The share read as real of each kind: the first is the probe's recall on real frames, the second its false alarms.
+    j["real_read_as_real"] = n_real ? (read_real & real).sum().item<double>() / double(n_real) : 0.0;
+    j["procedural_read_as_real"] = n_proc ? (read_real & ~real).sum().item<double>() / double(n_proc) : 0.0;
+    return j;
+  }
   auto heads = split_scene_logits(pred);
   const char* names[4] = {"weather_accuracy", "time_of_day_accuracy", "light_state_accuracy", "lead_close_accuracy"};
   for (size_t k = 0; k < 4; ++k)
@@ -182,10 +211,20 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   ProbeNet net(opt.kind, opt.frames);
   const Span span = span_of(net, cfg);
   auto train = data::frame_set(ds, split.train, span.reach(), 0);
-  auto val = data::frame_set(ds, val_ids, span.reach(), opt.val_examples);
+  // The realism probe scores its two classes on equal footing: a few real clips beside many procedural drives.
+  auto val = opt.kind == ProbeKind::kRealism ? footage_balanced_set(ds, val_ids, opt.val_examples)
+                                             : data::frame_set(ds, val_ids, span.reach(), opt.val_examples);
   const auto& train_eps = train.episodes;
   const auto& train_ex = train.frames;
   if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
+  // Realism batches draw half their frames from each class, however few real frames there are.
+  std::vector<Example> real_ex, procedural_ex;
+  if (opt.kind == ProbeKind::kRealism) {
+    for (const auto& e : train_ex) (train_eps.at(e.episode)->meta().is_procedural() ? procedural_ex : real_ex).push_back(e);
+    if (real_ex.empty() || procedural_ex.empty())
+      fail("{}: the realism probe needs real and procedural episodes among the training episodes; it has {} real and "
+           "{} procedural frames there", opt.dataset.string(), real_ex.size(), procedural_ex.size());
+  }
   if (val.frames.empty() && on_note) on_note("no held-out episodes: validation skipped");
   if (!(opt.decoded_share >= 0 && opt.decoded_share <= 1))
     fail("probe training: decoded_share must be in [0, 1], got {}", opt.decoded_share);
@@ -220,16 +259,28 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   net->train();
   while (step < opt.steps) {
     std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
-    std::uniform_int_distribution<size_t> pick(0, train_ex.size() - 1);
     std::vector<Example> b;
-    for (int i = 0; i < opt.batch; ++i) b.push_back(train_ex[pick(rng)]);
+    auto draw = [&](const std::vector<Example>& from, int n) {
+      std::uniform_int_distribution<size_t> pick(0, from.size() - 1);
+      for (int i = 0; i < n; ++i) b.push_back(from[pick(rng)]);
+    };
+    if (opt.kind == ProbeKind::kRealism) {
+      draw(real_ex, opt.batch / 2);
+      draw(procedural_ex, opt.batch - opt.batch / 2);
+    } else {
+      draw(train_ex, opt.batch);
+    }
     std::vector<bool> decoded;
     if (through.tokenizer) {
       std::bernoulli_distribution coin(opt.decoded_share);
       for (int i = 0; i < opt.batch; ++i) decoded.push_back(coin(rng));
     }
     auto x = inputs(train_eps, b, span, through, decoded).to(dev);
-    // Flip augmentation would swap left and right, which is the label of the dynamics probe: none here.
+    // Flip augmentation would swap left and right, which is the label of the dynamics probe; realism has no side.
+    if (opt.kind == ProbeKind::kRealism) {
+      auto flip = torch::rand({x.size(0)}, torch::TensorOptions().device(dev)) < 0.5;
+      x = torch::where(flip.view({-1, 1, 1, 1}), x.flip({3}), x);
+    }
     auto y = targets(opt.kind, train_eps, b, span).to(dev);
     const double lr = sched(step);
     train::set_lr(*optim, lr);

@@ -1,6 +1,6 @@
 #pragma once
 // `gaia probe train`: the dynamics and scene probes on a procedural-world dataset (frames with ground-truth labels),
-// with held-out evaluation on the dataset's validation episodes; resumable like every trainer here.
+// the realism probe on a dataset of real and procedural episodes, with held-out evaluation on the dataset's validation episodes; resumable like every trainer here.
 #include <functional>
 
 #include <nlohmann/json.hpp>
@@ -29,7 +29,7 @@ struct Span {
 };
 Span span_of(const ProbeNet& net, const Config& c);
 // Targets of examples: dynamics [N, 2] normalised speed/curvature averaged over the span's native frames; scene
-// [N, 4] int64 class ids (weather, time, light, lead close). Errors name the episode when a label is missing.
+// [N, 4] int64 class ids (weather, time, light, lead close); realism [N, 1], 1 for real footage. Errors name the episode when a label is missing.
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
                       const std::vector<Example>& ex, const Span& span);
 // Inputs [N, 3 * frames, H, W] of examples; with `through` (a tokenizer) the examples whose `decoded` flag is set
@@ -49,8 +49,13 @@ tokenizer::ImageTokenizer load_through(const fs::path& tokenizer, const cv::Mat&
 torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev,
                       const Through& through = {});
 
+// Up to n frames of the episodes `ids`, half from real footage and half procedural (every frame when n <= 0), each
+// half spread evenly over its episodes: the realism probe's held-out set.
+ExampleSet footage_balanced_set(const data::Dataset& ds, const std::vector<std::string>& ids, int n);
+
 // Metrics of predictions against targets: dynamics -> speed / curvature MAE (m/s, 1/m), Spearman, steering sign
-// accuracy (|curvature| >= 0.002 1/m); scene -> accuracy of each attribute.
+// accuracy (|curvature| >= 0.002 1/m); scene -> accuracy of each attribute; realism -> accuracy and the share of
+// real and of procedural frames read as real.
 nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& target);
 
 struct ProbeTrainOptions {

@@ -53,7 +53,7 @@ TokenizeResult tokenize_dataset(const fs::path& dataset, const fs::path& weights
   if (fs::exists(dataset / "split.json")) {
     data::Split sp = data::read_split(dataset / "split.json");
     if (mirror)
-      for (auto* ids : {&sp.train, &sp.val_geofence, &sp.val_random})
+      for (auto* ids : {&sp.train, &sp.val_geofence, &sp.val_random, &sp.val_named})
         for (size_t i = 0, n = ids->size(); i < n; ++i) ids->push_back(data::mirrored_id((*ids)[i]));
     write_file_atomic(out / "split.json", sp.to_json().dump(2) + "\n");
   }

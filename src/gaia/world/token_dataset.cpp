@@ -155,8 +155,12 @@ TokenDataset::TokenDataset(const fs::path& path, const TokenFormat& format, size
   }
 }
 
-void TokenDataset::open_file(const TokenFormat& f) {
+void TokenDataset::open_file(const TokenFormat& stated) {
   // One drive: training on its first part, validation on its end, so early stopping and the best checkpoint work.
+  const TokenSidecar side = read_token_sidecar(path_);
+  const TokenFormat f = file_format(stated, side, path_);
+  if (f.keep_rate && f.rate_hz <= 0)
+    fail("{}: --keep-rate needs the file's own frame rate: --token-fps, or 'fps' in its sidecar", path_.string());
   TokenArray a = read_token_file(path_, f);
   h_ = a.h;
   w_ = a.w;
@@ -171,6 +175,7 @@ void TokenDataset::open_file(const TokenFormat& f) {
     auto ep = std::make_shared<TokenEpisode>();
     ep->tokens.assign(a.ids.begin() + s0 * n, a.ids.begin() + s1 * n);
     Info info;
+    info.meta = side.meta;
     info.meta.id = part == 0 ? stem : stem + ".held-out";  // sorts after the stem: ids_ stays sorted
     info.steps = s1 - s0;
     info.actions.assign(static_cast<size_t>(info.steps) * 2, kNaN);
@@ -180,10 +185,19 @@ void TokenDataset::open_file(const TokenFormat& f) {
   }
 }
 
-void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFormat& f) {
+void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFormat& stated) {
   // Every file is read once here (frame counts, one grid, K); later reads go through the episode cache.
   int64_t top = -1;
+  double kept_rate = 0;  // --keep-rate: the one rate every file must share
   for (const auto& file : files) {
+    const TokenSidecar side = read_token_sidecar(file);
+    const TokenFormat f = file_format(stated, side, file);
+    if (f.keep_rate && f.rate_hz > 0) {
+      if (kept_rate > 0 && std::abs(kept_rate - f.rate_hz) > 0.01 * kept_rate)
+        fail("{}: {} fps, but {} has {} fps; --keep-rate trains at one rate, so the files must share it",
+             file.string(), f.rate_hz, files_.at(0).string(), kept_rate);
+      kept_rate = f.rate_hz;
+    }
     TokenArray a = read_token_file(file, f);
     if (files_.empty()) {
       h_ = a.h;
@@ -193,7 +207,7 @@ void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFor
     }
     top = std::max<int64_t>(top, *std::max_element(a.ids.begin(), a.ids.end()));
     Info info;
-    info.meta.id = file.stem().string();
+    info.meta = side.meta;
     if (!ids_.empty() && ids_.back() == info.meta.id)
       fail("{}: two token files named '{}' (.npy and .safetensors?); keep one", path_.string(), info.meta.id);
     info.steps = a.steps;
@@ -201,9 +215,14 @@ void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFor
     ids_.push_back(info.meta.id);
     info_.push_back(std::move(info));
     files_.push_back(file);
+    file_rate_.push_back(f.rate_hz);
   }
-  K_ = f.codebook_size > 0 ? f.codebook_size : top + 1;
-  rate_hz_ = f.dataset_rate_hz();
+  K_ = stated.codebook_size > 0 ? stated.codebook_size : top + 1;
+  if (stated.keep_rate && kept_rate <= 0)
+    fail("{}: --keep-rate needs the files' own frame rate: --token-fps, or 'fps' in their sidecars", path_.string());
+  TokenFormat rate = stated;
+  if (kept_rate > 0) rate.rate_hz = kept_rate;
+  rate_hz_ = rate.dataset_rate_hz();
 }
 
 fs::path TokenDataset::episode_dir(size_t e) const {
@@ -226,6 +245,7 @@ std::shared_ptr<const TokenEpisode> TokenDataset::load(size_t e) const {
     auto ep = std::make_shared<TokenEpisode>();
     TokenFormat f = format_;
     f.codebook_size = K_;
+    f.rate_hz = file_rate_.at(e);
     TokenArray a = read_token_file(files_.at(e), f);
     if (a.steps != steps(e) || a.h != h_ || a.w != w_) fail("{}: changed while in use", files_[e].string());
     ep->tokens = std::move(a.ids);

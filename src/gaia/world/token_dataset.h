@@ -4,9 +4,10 @@
 // WorldBatch examples that are unconditional, action- or text-conditioned in the §4.2 ratios (20/40/40).
 //
 //   TokenDataset   TOKENS/ (dataset.json, episodes/<id>/{tokens.npy, actions.npy, captions.jsonl, episode.json});
-//                  or token files of another tokenizer (token_file.h), without actions, text or metadata:
-//                  one file = one drive split in time (the last val_fraction held out), a directory of them =
-//                  one episode a file, held out by file (or by its split.json)
+//                  or token files of another tokenizer (token_file.h), without actions or text, with metadata
+//                  from a sidecar X.json where given: one file = one drive split in time (the last val_fraction
+//                  held out), a directory of them = one episode a file, held out by file (or by its split.json,
+//                  which `gaia data split --geofence` writes from the sidecars' positions)
 //   Window         steps [start, start + steps) of one episode; never crosses episodes
 //   WindowSampler  uniform or balanced (data::Balancer over weather, time of day, location, steering, speed)
 //   make_batch     windows -> tokens [B,T,n], actions [B,T,2] (normalised), text_ids [B,T,m], use_action/use_text
@@ -121,6 +122,7 @@ class TokenDataset {
   fs::path path_;
   TokenFormat format_;
   std::vector<fs::path> files_;  // a directory of other tokenizers' files: episode e is files_[e]
+  std::vector<double> file_rate_;  // ... and its frame rate (--token-fps, or its sidecar's fps)
   int64_t h_ = 0, w_ = 0, K_ = 0;
   double rate_hz_ = 0;
   bool has_captions_ = false;

@@ -1,9 +1,11 @@
 #include "gaia/world/token_file.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
 #include "gaia/core/error.h"
+#include "gaia/core/json_file.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 
@@ -43,6 +45,51 @@ std::vector<int64_t> TokenFormat::kept_frames(int64_t frames, const fs::path& fi
     if (i >= frames) break;
     out.push_back(i);
   }
+  return out;
+}
+
+TokenSidecar read_token_sidecar(const fs::path& token_file) {
+  TokenSidecar s;
+  s.meta.id = token_file.stem().string();
+  const fs::path side = fs::path(token_file).replace_extension(".json");
+  if (!fs::exists(side)) return s;
+  const nlohmann::json j = read_json(side);
+  if (!j.is_object()) fail("{}: a token file's sidecar must be a JSON object", side.string());
+  static const std::vector<std::string> known{"latitude", "longitude", "weather", "time_of_day", "fps"};
+  for (auto it = j.begin(); it != j.end(); ++it)
+    if (std::find(known.begin(), known.end(), it.key()) == known.end())
+      fail("{}: unknown key '{}' (a token file's sidecar knows: latitude, longitude, weather, time_of_day, fps)",
+           side.string(), it.key());
+  auto number = [&](const char* key, double lo, double hi) {
+    if (!j.contains(key) || j.at(key).is_null()) return std::numeric_limits<double>::quiet_NaN();
+    if (!j.at(key).is_number() || !(j.at(key).get<double>() >= lo && j.at(key).get<double>() <= hi))
+      fail("{}: '{}' must be a number in [{}, {}]", side.string(), key, lo, hi);
+    return j.at(key).get<double>();
+  };
+  auto text = [&](const char* key) {
+    if (!j.contains(key)) return std::string();
+    if (!j.at(key).is_string()) fail("{}: '{}' must be a string", side.string(), key);
+    return j.at(key).get<std::string>();
+  };
+  s.meta.latitude = number("latitude", -90, 90);
+  s.meta.longitude = number("longitude", -180, 180);
+  if (std::isnan(s.meta.latitude) != std::isnan(s.meta.longitude))
+    fail("{}: give latitude and longitude together", side.string());
+  s.meta.weather = text("weather");
+  s.meta.time_of_day = text("time_of_day");
+  const double fps = number("fps", 0, 1000);
+  if (fps == 0) fail("{}: 'fps' must be above 0", side.string());
+  s.fps = std::isnan(fps) ? 0 : fps;
+  return s;
+}
+
+TokenFormat file_format(const TokenFormat& f, const TokenSidecar& s, const fs::path& token_file) {
+  TokenFormat out = f;
+  if (s.fps <= 0) return out;
+  if (f.rate_hz > 0 && std::abs(f.rate_hz - s.fps) > 0.01 * s.fps)
+    fail("{}: --token-fps {} does not match the {} fps its sidecar {} states", token_file.string(), f.rate_hz, s.fps,
+         fs::path(token_file).replace_extension(".json").filename().string());
+  out.rate_hz = s.fps;
   return out;
 }
 

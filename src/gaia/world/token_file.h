@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "gaia/core/fs.h"
+#include "gaia/data/episode.h"
 
 namespace gaia::world {
 
@@ -36,6 +37,18 @@ struct TokenArray {
 };
 
 bool is_token_file(const fs::path& p);  // a .npy or .safetensors file
+
+// What a token file cannot say about its drive, from an optional sidecar X.json beside X.npy: "latitude" and
+// "longitude" (for the geofenced split and balancing), "weather", "time_of_day", and "fps", the file's frame rate.
+// Any other key is an error naming the sidecar. No sidecar: an empty record.
+struct TokenSidecar {
+  data::EpisodeMeta meta;  // id = the file's stem; the fields above where given
+  double fps = 0;          // 0 = not given
+};
+TokenSidecar read_token_sidecar(const fs::path& token_file);
+// `f` for one file: its sidecar's fps becomes the rate (--token-fps need not be given); a stated --token-fps that
+// disagrees with the sidecar by more than 1% is an error naming both.
+TokenFormat file_format(const TokenFormat& f, const TokenSidecar& s, const fs::path& token_file);
 
 // Reads, reshapes, subsamples and checks one file (ids >= 0 always; < K when K is stated). A safetensors file
 // holds one integer tensor, or one named "tokens".
