@@ -414,6 +414,27 @@ TEST(TokenizerTrainCli, BadInputsAreClearErrors) {
   EXPECT_NE(n.output.find("not a gaia tokenizer"), std::string::npos) << n.output;
 }
 
+// Fine-tuning the shipped tokenizer without a config: its refinement and token blocks come from the weights instead
+// of being dropped (the built-in defaults have none), and a --set still wins.
+TEST(TokenizerTrainCli, InitKeepsTheArchitectureOfItsWeights) {
+  test::TempDir dir;
+  auto r = test::run_gaia("synth --episodes 2 --seconds 0.4 --seed 3 --out " + test::q(dir / "ds"));  // 72x128
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fs::path shipped = test::source_dir() / "models" / "tokenizer.safetensors";
+  r = test::run_gaia("tokenizer train " + test::q(dir / "ds") + " --init " + test::q(shipped) +
+                     " --decoder-only --steps 1 --val-every 0 --threads 1 --out " + test::q(dir / "ft"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("tokenizer.refine_blocks=2, as the --init weights have it"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("dropped"), std::string::npos) << r.output;
+  SafetensorsFile a(shipped), b(dir / "ft" / "tokenizer.safetensors");
+  EXPECT_EQ(a.names(), b.names());
+  r = test::run_gaia("tokenizer train " + test::q(dir / "ds") + " --init " + test::q(shipped) +
+                     " --decoder-only --set tokenizer.token_blocks=0 --steps 1 --val-every 0 --threads 1 --out " +
+                     test::q(dir / "ft0"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("dropped (first: 'decoder.token.0"), std::string::npos) << r.output;
+}
+
 TEST(TokenizerTrain, TokenizeMirrorAddsMirrorImagesThatSteerTheOtherWay) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 1.0);

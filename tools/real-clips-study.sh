@@ -77,7 +77,8 @@ for clip in highway night kitti-res kitti-raw; do
     [ -f "$F/tok/tokenizer.safetensors" ] || gaia tokenizer train "$F/mix" --init "$MODELS/tokenizer.safetensors" \
         --steps "$TOK_STEPS" --val-every 0 --set 'data.balance_tokenizer=[footage]' --set data.balance_exponent=1 \
         --set tokenizer.lr=1e-4 --set tokenizer.final_lr=1e-5 --set tokenizer.warmup_steps=20 \
-        --set tokenizer.disc_start=1000000000 --out "$F/tok" $T
+        --set tokenizer.disc_start=1000000000 --set tokenizer.refine_blocks=2 --set tokenizer.token_blocks=2 \
+        --set tokenizer.ema_decay=0.999 --out "$F/tok" $T
     linked "$F/eval-clip" "$OUT/real" "$clip"
     linked "$F/eval-synth" "$OUT/synth" synth-s5-e00022 synth-s5-e00023
     for name in shipped fine-tuned; do

@@ -73,7 +73,8 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("DATASET", *dataset, "episode dataset (gaia synth / gaia ingest)")->required();
     cmd->add_option("--vgg", *vgg, "VGG16 weights (torchvision layout, safetensors) for the perceptual loss");
     cmd->add_option("--dino", *dino, "DINO ViT weights (timm or torchvision layout, safetensors) for the DINO loss");
-    cmd->add_option("--init", o->init, "start from these tokenizer weights (fine-tuning; ignored when resuming)");
+    cmd->add_option("--init", o->init, "start from these tokenizer weights (fine-tuning; ignored when resuming); "
+                    "without --config, their architecture (tokenizer.* keys not given with --set) is kept");
     cmd->add_option("--steps", o->steps, "total steps (default: config tokenizer.steps)")->check(number_in({1, 1e9}));
     cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
@@ -88,6 +89,9 @@ void register_tokenizer(CLI::App& app) {
       tokenizer::TrainOptions opt = *o;
       opt.dataset = *dataset;
       opt.out = flags->out;
+      if (!opt.init.empty())
+        for (const auto& k : adopt_init_architecture(c, opt.init, *flags, "tokenizer"))
+          std::fprintf(stderr, "tokenizer: %s, as the --init weights have it\n", k.c_str());
       opt.vgg = *vgg;
       opt.dino = *dino;
       std::unique_ptr<ProgressBar> bar;

@@ -201,6 +201,30 @@ void apply_threads(const Config& c) {
   set_torch_threads(c.run.threads);
 }
 
+std::vector<std::string> adopt_init_architecture(Config& c, const fs::path& init, const SharedFlags& f,
+                                                 const std::string& section) {
+  std::vector<std::string> adopted;
+  if (!f.config.empty() || !fs::exists(init)) return adopted;  // a config file describes the model; a missing file fails later
+  auto md = SafetensorsFile(init).metadata();
+  if (!md.count("gaia.config")) return adopted;
+  Config stored;
+  stored.apply_yaml(md["gaia.config"], init.string() + " [metadata]");
+  auto theirs = stored.fields();
+  for (auto& field : c.fields()) {
+    if (field.role != ConfigRole::Architecture || field.key.rfind(section + ".", 0) != 0) continue;
+    bool pinned = false;
+    for (const auto& s : f.sets) pinned = pinned || s.rfind(field.key + "=", 0) == 0;
+    if (pinned) continue;
+    for (auto& t : theirs)
+      if (t.key == field.key && t.get() != field.get()) {
+        field.set(t.get());
+        adopted.push_back(field.key + "=" + t.get());
+      }
+  }
+  c.validate();
+  return adopted;
+}
+
 torch::Tensor read_tokens(const fs::path& p, int64_t* prompt_frames) {
   torch::Tensor t;
   if (prompt_frames) *prompt_frames = 0;

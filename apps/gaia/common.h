@@ -101,6 +101,12 @@ int run_gaia_child(const std::vector<std::string>& args);
 // The exact command line of this run (set by main), recorded in reports so that every figure can be remade.
 extern std::string g_command_line;
 
+// Fine-tuning from --init weights: the architecture keys of `section` ("tokenizer") that neither --config nor --set
+// pins take the values stored in the weights, so their layers are kept rather than dropped. Returns the keys
+// adopted, as "key=value" (none for weights without a stored config).
+std::vector<std::string> adopt_init_architecture(Config& c, const fs::path& init, const SharedFlags& f,
+                                                 const std::string& section);
+
 // Token frames from a rollout (.safetensors "tokens" [F, N, h, w] or [N, h, w]), a .npy [N, h, w], or a token
 // dataset episode directory (its tokens.npy) -> int64 [F, N, h, w]. `prompt_frames` (when given) gets the rollout's
 // prompt length from its metadata (0 for other files).
