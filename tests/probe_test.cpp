@@ -302,7 +302,7 @@ TEST(ProbeCli, RealismTellsRealFootageFromProcedural) {
   r = test::run_gaia("data split " + q(d / "ds") + " --hold-out cam2 --hold-out synth-s9-e00003" + tiny);
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("2 named"), std::string::npos) << r.output;
-  r = test::run_gaia("probe train realism " + q(d / "ds") + tiny + " --steps 60 --batch-size 16 --val-every 60 --out " +
+  r = test::run_gaia("probe train realism " + q(d / "ds") + tiny + " --steps 150 --batch-size 16 --val-every 150 --out " +
                      q(d / "real"));
   ASSERT_EQ(r.status, 0) << r.output;
   const fs::path w = d / "real" / "probe-realism.safetensors";

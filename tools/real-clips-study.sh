@@ -59,7 +59,7 @@ mixed() {
   linked "$dir" "$1"
   shift
   for src in "$@"; do for e in $(ls "$src/episodes"); do ln -s "$(cd "$src/episodes/$e" && pwd)" "$dir/episodes/$e"; done; done
-  gaia data split "$dir" "${hold[@]}" --val-fraction 0.1 > /dev/null
+  gaia data split "$dir" "${hold[@]}" --val-fraction 0 > /dev/null  # nothing else held out: every other clip trains
 }
 
 RESULTS="$OUT/results.jsonl"

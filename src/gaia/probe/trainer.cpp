@@ -145,6 +145,32 @@ std::vector<double> col(const torch::Tensor& t, int64_t c, double scale) {
 
 }  // namespace
 
+torch::Tensor realism_augment(const torch::Tensor& x, std::mt19937_64& rng) {
+  // A few real clips teach their own look (a grey camera, one sunny road, night) as easily as "real": colour, light,
+  // framing and side are drawn afresh for every example, so what is left to learn is how camera footage differs
+  // from rendered frames.
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<torch::Tensor> out;
+  const int64_t H = x.size(2), W = x.size(3);
+  for (int64_t i = 0; i < x.size(0); ++i) {
+    auto f = x[i];
+    const double scale = 0.7 + 0.3 * u(rng);
+    const int64_t h = std::max<int64_t>(8, std::lround(double(H) * scale)), w = std::max<int64_t>(8, std::lround(double(W) * scale));
+    const int64_t top = int64_t(u(rng) * double(H - h + 1)) % (H - h + 1), left = int64_t(u(rng) * double(W - w + 1)) % (W - w + 1);
+    f = F::interpolate(f.slice(1, top, top + h).slice(2, left, left + w).unsqueeze(0),
+                       F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))
+            .squeeze(0);
+    if (u(rng) < 0.5) f = f.flip({2});
+    auto grey = f.mean(0, true);
+    const double saturation = u(rng) < 0.25 ? 0.0 : 1.5 * u(rng);
+    f = grey + saturation * (f - grey);
+    const double contrast = 0.6 + 0.8 * u(rng), brightness = 0.6 * (u(rng) - 0.5);
+    f = (f - f.mean()) * contrast + f.mean() + brightness;
+    out.push_back(f.clamp(-1, 1));
+  }
+  return torch::stack(out);
+}
+
 ExampleSet footage_balanced_set(const data::Dataset& ds, const std::vector<std::string>& ids, int n) {
   std::vector<std::string> real, procedural;
   for (const auto& id : ids) {
@@ -277,10 +303,7 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     }
     auto x = inputs(train_eps, b, span, through, decoded).to(dev);
     // Flip augmentation would swap left and right, which is the label of the dynamics probe; realism has no side.
-    if (opt.kind == ProbeKind::kRealism) {
-      auto flip = torch::rand({x.size(0)}, torch::TensorOptions().device(dev)) < 0.5;
-      x = torch::where(flip.view({-1, 1, 1, 1}), x.flip({3}), x);
-    }
+    if (opt.kind == ProbeKind::kRealism) x = realism_augment(x, rng);
     auto y = targets(opt.kind, train_eps, b, span).to(dev);
     const double lr = sched(step);
     train::set_lr(*optim, lr);

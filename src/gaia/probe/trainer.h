@@ -2,6 +2,7 @@
 // `gaia probe train`: the dynamics and scene probes on a procedural-world dataset (frames with ground-truth labels),
 // the realism probe on a dataset of real and procedural episodes, with held-out evaluation on the dataset's validation episodes; resumable like every trainer here.
 #include <functional>
+#include <random>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -48,6 +49,10 @@ tokenizer::ImageTokenizer load_through(const fs::path& tokenizer, const cv::Mat&
 // tokenizer when `through` has one.
 torch::Tensor predict(ProbeNet& net, const ExampleSet& s, const Span& span, const torch::Device& dev,
                       const Through& through = {});
+
+// The realism probe's training augmentation of inputs [B, 3, H, W] in [-1, 1]: a random crop (70-100% of each side)
+// resized back, a horizontal flip, saturation (grey a quarter of the time), contrast and brightness, per example.
+torch::Tensor realism_augment(const torch::Tensor& x, std::mt19937_64& rng);
 
 // Up to n frames of the episodes `ids`, half from real footage and half procedural (every frame when n <= 0), each
 // half spread evenly over its episodes: the realism probe's held-out set.
