@@ -1,6 +1,7 @@
 // Evaluation probes: Frechet distance and Spearman against closed forms, shapes, learning on procedural data,
 // exact resume through the CLI, the realism probe on real and procedural episodes, and bad inputs.
 #include <algorithm>
+#include <random>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -350,4 +351,24 @@ TEST(ProbeCli, RealismTellsRealFootageFromProcedural) {
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
   EXPECT_NE(r.output.find("needs real and procedural episodes"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "none" / "probe-realism.safetensors"));
+}
+
+// The realism probe's augmentation: shape and range kept, the same draws for the same seed, and each example changed
+// on its own (a grey example beside a coloured one).
+TEST(Probe, RealismAugmentationIsSeededAndStaysInRange) {
+  torch::manual_seed(3);
+  auto x = torch::rand({16, 3, 24, 32}) * 2 - 1;
+  std::mt19937_64 a(7), b(7), c(8);
+  auto ya = probe::realism_augment(x, a), yb = probe::realism_augment(x, b), yc = probe::realism_augment(x, c);
+  ASSERT_EQ(ya.sizes(), x.sizes());
+  EXPECT_TRUE(torch::equal(ya, yb));
+  EXPECT_FALSE(torch::equal(ya, yc));
+  EXPECT_LE(ya.abs().max().item<float>(), 1.0f);
+  int grey = 0;
+  for (int64_t i = 0; i < 16; ++i) {
+    EXPECT_FALSE(torch::allclose(ya[i], x[i]));
+    grey += (ya[i][0] - ya[i][1]).abs().max().item<float>() < 1e-6 && (ya[i][1] - ya[i][2]).abs().max().item<float>() < 1e-6;
+  }
+  EXPECT_GE(grey, 1);   // a quarter are grey on average: at least one of 16 ...
+  EXPECT_LE(grey, 12);  // ... and not all
 }
