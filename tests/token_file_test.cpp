@@ -238,6 +238,11 @@ TEST(TokenFile, SidecarsGivePlaceAndRateAndAreChecked) {
   TokenFormat keep = unstated;
   keep.keep_rate = true;
   err = test::error_of([&] { TokenDataset(dir / "drives", keep); });
+  EXPECT_NE(err.find("d0.npy: --keep-rate needs each file's own frame rate"), std::string::npos) << err;  // no sidecar
+  write_file_atomic(dir / "drives" / "d0.json", R"({"fps": 20})");
+  write_file_atomic(dir / "drives" / "d3.json", R"({"fps": 20})");
+  err = test::error_of([&] { TokenDataset(dir / "drives", keep); });
+  EXPECT_NE(err.find("d2.npy: 10 fps, but"), std::string::npos) << err;
   EXPECT_NE(err.find("--keep-rate trains at one rate"), std::string::npos) << err;
   write_file_atomic(dir / "drives" / "d2.json", R"({"latitude": 48.9, "longitude": 8.4, "speed": 3})");
   err = test::error_of([&] { TokenDataset(dir / "drives", unstated); });

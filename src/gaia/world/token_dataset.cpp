@@ -192,7 +192,9 @@ void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFor
   for (const auto& file : files) {
     const TokenSidecar side = read_token_sidecar(file);
     const TokenFormat f = file_format(stated, side, file);
-    if (f.keep_rate && f.rate_hz > 0) {
+    if (f.keep_rate) {
+      if (f.rate_hz <= 0)
+        fail("{}: --keep-rate needs each file's own frame rate: --token-fps, or 'fps' in its sidecar", file.string());
       if (kept_rate > 0 && std::abs(kept_rate - f.rate_hz) > 0.01 * kept_rate)
         fail("{}: {} fps, but {} has {} fps; --keep-rate trains at one rate, so the files must share it",
              file.string(), f.rate_hz, files_.at(0).string(), kept_rate);
@@ -218,8 +220,6 @@ void TokenDataset::open_files(const std::vector<fs::path>& files, const TokenFor
     file_rate_.push_back(f.rate_hz);
   }
   K_ = stated.codebook_size > 0 ? stated.codebook_size : top + 1;
-  if (stated.keep_rate && kept_rate <= 0)
-    fail("{}: --keep-rate needs the files' own frame rate: --token-fps, or 'fps' in their sidecars", path_.string());
   TokenFormat rate = stated;
   if (kept_rate > 0) rate.rate_hz = kept_rate;
   rate_hz_ = rate.dataset_rate_hz();
