@@ -173,10 +173,8 @@ torch::Tensor realism_augment(const torch::Tensor& x, std::mt19937_64& rng) {
 
 ExampleSet footage_balanced_set(const data::Dataset& ds, const std::vector<std::string>& ids, int n) {
   std::vector<std::string> real, procedural;
-  for (const auto& id : ids) {
-    auto idx = data::episode_indices(ds, {id});
-    (ds.meta(idx.at(0)).is_procedural() ? procedural : real).push_back(id);
-  }
+  const auto idx = data::episode_indices(ds, ids);
+  for (size_t k = 0; k < ids.size(); ++k) (ds.meta(idx[k]).is_procedural() ? procedural : real).push_back(ids[k]);
   const int half = n > 0 ? std::max(1, n / 2) : 0;
   auto a = data::frame_set(ds, real, 0, half), b = data::frame_set(ds, procedural, 0, n > 0 ? n - half : 0);
   return data::merge(std::move(a), std::move(b));
