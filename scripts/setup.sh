@@ -5,6 +5,7 @@ set -euo pipefail
 PKGS=(
   build-essential cmake ninja-build ccache pkg-config
   libtorch-dev                 # LibTorch 1.13 (CPU); find_package(Torch)
+  libgloo-dev                  # Gloo's headers: c10d's CPU process group (data-parallel training)
   libopenblas0-pthread         # fast BLAS for LibTorch's matrix products (the default reference BLAS is ~10x slower)
   libopencv-dev                # image / video I/O (FFmpeg backend)
   ffmpeg                       # video codecs used by OpenCV's FFmpeg backend

@@ -20,20 +20,23 @@ torch::Tensor reference(const torch::Tensor& q, const torch::Tensor& k, const to
 
 }  // namespace
 
+// On GAIA_TEST_DEVICE: with LibTorch 2 on CUDA, the fused kernels.
 TEST(Attention, MatchesTheFormulaWithAndWithoutBiasAndMask) {
   torch::manual_seed(3);
-  auto q = torch::randn({2, 3, 5, 8}), k = torch::randn({2, 3, 7, 8}), v = torch::randn({2, 3, 7, 4});
+  const auto o = torch::TensorOptions().device(torch::Device(test::device_name()));
+  auto q = torch::randn({2, 3, 5, 8}, o), k = torch::randn({2, 3, 7, 8}, o), v = torch::randn({2, 3, 7, 4}, o);
   EXPECT_TRUE(torch::allclose(attention(q, k, v), reference(q, k, v, {}), 1e-5, 1e-6));
-  auto mask2 = torch::randn({5, 7});
+  auto mask2 = torch::randn({5, 7}, o);
   EXPECT_TRUE(torch::allclose(attention(q, k, v, mask2), reference(q, k, v, mask2), 1e-5, 1e-6));
-  auto per_head = torch::randn({1, 3, 5, 7});
+  auto per_head = torch::randn({1, 3, 5, 7}, o);
   EXPECT_TRUE(torch::allclose(attention(q, k, v, per_head), reference(q, k, v, per_head), 1e-5, 1e-6));
   EXPECT_EQ(attention(q, k, v).sizes(), (std::vector<int64_t>{2, 3, 5, 4}));
 }
 
 TEST(Attention, CausalMaskSeesOnlyEarlierKeys) {
   torch::manual_seed(4);
-  auto q = torch::randn({2, 6, 8}), k = torch::randn({2, 6, 8}), v = torch::randn({2, 6, 8});
+  const auto o = torch::TensorOptions().device(torch::Device(test::device_name()));
+  auto q = torch::randn({2, 6, 8}, o), k = torch::randn({2, 6, 8}, o), v = torch::randn({2, 6, 8}, o);
   const auto m = causal_mask(6, 6, 0, q.options());
   EXPECT_EQ(m[2][2].item<float>(), 0.0f);
   EXPECT_EQ(m[2][3].item<float>(), -std::numeric_limits<float>::infinity());

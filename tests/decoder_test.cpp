@@ -338,15 +338,16 @@ TEST(DecoderVideo, DecodesToTwentyFiveHertzKeepingKnownFrames) {
   randomize(*m, 7);
   m->eval();
   NoiseSchedule sch;
-  const int64_t N = 7;
-  auto tokens = torch::randint(0, m->K, {2, N, 4, 8}, torch::kLong);
-  auto cond = torch::rand({2, N, 3, 32, 64}) * 2 - 1;
+  const int64_t N = 6;  // more frames than one window of decoder.frames
+  auto tokens = torch::randint(0, m->K, {1, N, 4, 8}, torch::kLong);
+  auto cond = torch::rand({1, N, 3, 32, 64}) * 2 - 1;
   DecodeOptions o;
   o.sample.steps = 2;
   o.out_fps = 12.5;
   int last = 0, total = 0;
   auto v = decode_video(m, sch, tokens, cond, o, [&](int d, int t) { last = d, total = t; });
-  EXPECT_EQ(v.sizes(), (std::vector<int64_t>{2, 2 * N - 1, 3, 32, 64}));
+  EXPECT_EQ(v.sizes(), (std::vector<int64_t>{1, 2 * N - 1, 3, 32, 64}));
+  EXPECT_GT(total, 1);
   EXPECT_EQ(last, total);
   EXPECT_EQ(total, count_windows(N, c.decoder.frames, 6.25, 12.5));
   EXPECT_LE(v.abs().max().item<float>(), 1.0f);

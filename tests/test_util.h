@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cstdlib>
 #include <cstdio>
 #include <functional>
 #include <sstream>
@@ -18,7 +19,9 @@
 
 #include "gaia/core/error.h"
 #include "gaia/core/fs.h"
+#ifndef GAIA_NO_VIDEO
 #include "gaia/synth/synth.h"
+#endif
 
 namespace gaia::test {
 
@@ -37,6 +40,14 @@ struct TempDir {
   fs::path operator/(const std::string& s) const { return path / s; }
 };
 
+// The device the model tests run on: GAIA_TEST_DEVICE (cpu, cuda, cuda:N; scripts/gpu-check.sh sets cuda), else
+// the CPU.
+inline std::string device_name() {
+  const char* d = std::getenv("GAIA_TEST_DEVICE");
+  return d && *d ? d : "cpu";
+}
+
+#ifndef GAIA_NO_VIDEO
 // Episodes first .. first + count - 1 of a small procedural dataset (32x64 by default, the tiny config's size).
 inline void synth_dataset(const fs::path& dir, int count, double seconds, int first = 0, int height = 32, int width = 64) {
   synth::SynthOptions o;
@@ -46,6 +57,7 @@ inline void synth_dataset(const fs::path& dir, int count, double seconds, int fi
   o.seed = 5;
   for (int e = first; e < first + count; ++e) synth::write_episode(dir, o, e);
 }
+#endif
 
 // A path quoted for the shell command lines run_gaia takes.
 inline std::string q(const fs::path& p) { return "'" + p.string() + "'"; }

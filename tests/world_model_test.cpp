@@ -24,9 +24,11 @@ Config tiny() { return Config::load(test::source_dir() / "configs" / "tiny.yaml"
 
 constexpr int64_t kN = 6, kK = 32;
 
+// On GAIA_TEST_DEVICE (scripts/gpu-check.sh: CUDA), with its batches.
 WorldModel small_model(const Config& c, uint64_t seed = 0) {
   torch::manual_seed(seed);
   WorldModel m(c.world, kN, kK);
+  m->to(torch::Device(test::device_name()));
   m->eval();
   return m;
 }
@@ -37,7 +39,7 @@ WorldBatch random_batch(const Config& c, int64_t B, int64_t T, uint64_t seed = 1
   b.tokens = torch::randint(0, kK, {B, T, kN}, torch::kLong);
   b.actions = torch::randn({B, T, 2});
   b.text_ids = torch::randint(0, c.world.text_vocab, {B, T, c.world.text_tokens}, torch::kLong);
-  return b;
+  return b.to(torch::Device(test::device_name()));
 }
 
 }  // namespace

@@ -64,11 +64,15 @@ void register_decoder(CLI::App& app) {
     cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, decoder.safetensors, metrics.jsonl)");
+    auto par = std::make_shared<ParallelFlags>();
+    add_parallel_flags(cmd, par.get());
     cmd->callback([=] {
       Config c = resolve_config(*flags);
-      apply_threads(c);
       if (flags->out.empty()) fail("gaia decoder train: --out RUN_DIR is required");
+      if (launch_local_ranks(*par)) return;
+      auto dist = join_job(*par, c);
       decoder::DecoderTrainOptions opt = *o;
+      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer};
       opt.dataset = *dataset;
       opt.tokenizer = *tok;
       opt.out = flags->out;
@@ -84,6 +88,7 @@ void register_decoder(CLI::App& app) {
           },
           [](const std::string& n) { std::fprintf(stderr, "decoder: %s\n", n.c_str()); });
       if (bar) bar->finish();
+      if (!dist->is_main()) return;
       const int total = opt.steps > 0 ? opt.steps : c.decoder.steps;
       std::printf("decoder: step %d%s; last validation %s\n", r.final_step,
                   r.final_step >= total ? " (done)" : " (checkpointed)", r.last_val.dump().c_str());

@@ -3,21 +3,25 @@
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "common.h"
-#include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
-#include "gaia/data/video_io.h"
 #include "gaia/sizing/sizing.h"
-#include "gaia/synth/synth.h"
-#include "gaia/tokenizer/io.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
-#include "gaia/world/token_file.h"
 #include "gaia/world/rollout.h"
 #include "gaia/world/token_dataset.h"
+#include "gaia/world/token_file.h"
+#ifndef GAIA_NO_VIDEO
+#include <opencv2/imgproc.hpp>
+
+#include "gaia/data/video_io.h"
+#include "gaia/emerging/common.h"
+#include "gaia/synth/synth.h"
+#include "gaia/tokenizer/io.h"
+#endif
 
 namespace gaia::app {
 
@@ -107,12 +111,19 @@ void register_generate(CLI::App& app) {
     torch::Tensor prompt_actions;
     int64_t P = 0;
     const int64_t want_p = g->prompt_frames >= 0 ? g->prompt_frames : std::min<int64_t>(L.T - 1, 4);
+    const bool preview = !g->tokenizer.empty();  // a preview video through the tokenizer's decoder
+#ifdef GAIA_NO_VIDEO
+    if (preview || !g->video.empty() || !g->actions_csv.empty())
+      fail("--tokenizer, --video and --actions need a build with video support (this one was built with "
+           "-DGAIA_WITH_VIDEO=OFF): prompt from TOKENS, steer with --steer / --speed, decode elsewhere");
+#else
     tokenizer::ImageTokenizer tok{nullptr};
     Config tok_cfg;
     if (!g->tokenizer.empty()) {
       tok = tokenizer::load_tokenizer(g->tokenizer, dev, &tok_cfg);
       emerging::check_tokenizer_fits(info, g->world, tok, g->tokenizer);  // before anything is written
     }
+#endif
     if (!g->tokens.empty()) {
       world::TokenDataset ds(g->tokens, token_format(g->format, run, false, &info));
       if (ds.grid_h() != info.grid_h || ds.grid_w() != info.grid_w)
@@ -135,7 +146,9 @@ void register_generate(CLI::App& app) {
                            .clone();
       prompt_actions.select(1, 0).div_(world::kSpeedScale);
       prompt_actions.select(1, 1).div_(world::kCurvatureScale);
-    } else if (!g->video.empty()) {
+    }
+#ifndef GAIA_NO_VIDEO
+    else if (!g->video.empty()) {
       if (!tok) fail("--video needs --tokenizer to turn the frames into tokens");
       auto frames = data::read_frames_at_rate(g->video, tok_cfg.data.world_fps, want_p, tok_cfg.data.height,
                                               tok_cfg.data.width);
@@ -143,6 +156,7 @@ void register_generate(CLI::App& app) {
       if (p.tokens.size(1) != L.n) fail("the tokenizer gives {} tokens per frame, the world model takes {}", p.tokens.size(1), L.n);
       P = p.tokens.size(0);
     }
+#endif
     const int64_t steps = P + F;
 
     // Actions: prompt steps keep theirs; generated steps from --actions / --steer / --speed, otherwise none.
@@ -156,6 +170,7 @@ void register_generate(CLI::App& app) {
       fail("{}: this world model never saw an action (trained on drives without speed or curvature), so --steer, "
            "--speed and --actions would do nothing; train on drives with signals (or gaia ingest --motion video)",
            g->world);
+#ifndef GAIA_NO_VIDEO
     if (!g->actions_csv.empty()) {
       auto rows = synth::read_actions_csv(g->actions_csv);
       if (int64_t(rows.size()) != F)
@@ -165,7 +180,9 @@ void register_generate(CLI::App& app) {
         acts[P + k][1] = rows[size_t(k)].curvature / world::kCurvatureScale;
       }
       any_action = true;
-    } else if (g->steer != "none" || g->speed >= 0) {
+    } else
+#endif
+    if (g->steer != "none" || g->speed >= 0) {
       const double v = g->speed >= 0 ? g->speed : last_speed;
       const double c = g->steer != "none" ? steer_curvature(g->steer) : 0.0;
       acts.narrow(0, P, F).select(1, 0).fill_(v / world::kSpeedScale);
@@ -202,9 +219,10 @@ void register_generate(CLI::App& app) {
       fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
 
     const int passes = o.guidance.active() ? (p.actions.defined() && p.text_ids.defined() ? 3 : 2) : 1;
-    sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, bool(tok)),
+    sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, preview),
                        fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");
+    Autocast autocast(precision_for(run.run.precision, dev), dev);  // run.precision: bf16 / fp16 sampling
     auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });
     bar.finish();
     fs::create_directories(flags->out);
@@ -219,6 +237,7 @@ void register_generate(CLI::App& app) {
                  {{"gaia.rollout", meta.dump()}});
     std::printf("generated %lld frames x %d futures in %.2f s (%.2f frames/s) -> %s/rollout.safetensors\n",
                 (long long)F, g->futures, r.seconds, double(F * g->futures) / r.seconds, flags->out.c_str());
+#ifndef GAIA_NO_VIDEO
     if (tok) {
       // Quick preview through the tokenizer's own decoder (frame by frame; the video decoder is `gaia decode`).
       std::vector<std::vector<cv::Mat>> rows;
@@ -237,6 +256,7 @@ void register_generate(CLI::App& app) {
       std::printf("preview (tokenizer decoder, futures side by side, prompt frames outlined): %s/preview.mp4\n",
                   flags->out.c_str());
     }
+#endif
   });
 }
 

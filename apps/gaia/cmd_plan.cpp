@@ -39,7 +39,8 @@ void register_plan(CLI::App& app) {
                           {"image_tokens", p.image_tokens},
                           {"sequence_length", p.sequence_length},
                           {"bit_compression", p.bit_compression},
-                          {"world_flops_per_token", p.world_flops_per_token}};
+                          {"world_flops_per_token", p.world_flops_per_token},
+                          {"world_flops_per_token_with_attn", p.world_flops_per_token_with_attn}};
       std::printf("%s\n", j.dump(2).c_str());
     } else {
       std::fputs(sizing::format_plan(p, c).c_str(), stdout);

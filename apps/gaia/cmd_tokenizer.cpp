@@ -82,16 +82,20 @@ void register_tokenizer(CLI::App& app) {
                   "train only the decoder (needs --init): encoder and codebook frozen, so every frame keeps its codes "
                   "and token datasets made with the --init weights stay valid");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, tokenizer.safetensors, metrics.jsonl)");
+    auto par = std::make_shared<ParallelFlags>();
+    add_parallel_flags(cmd, par.get());
     cmd->callback([=] {
       Config c = resolve_config(*flags);
-      apply_threads(c);
       if (flags->out.empty()) fail("gaia tokenizer train: --out RUN_DIR is required");
+      if (launch_local_ranks(*par)) return;
+      auto dist = join_job(*par, c);
       tokenizer::TrainOptions opt = *o;
+      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer};
       opt.dataset = *dataset;
       opt.out = flags->out;
       if (!opt.init.empty())
         for (const auto& k : adopt_init_architecture(c, opt.init, *flags, "tokenizer"))
-          std::fprintf(stderr, "tokenizer: %s, as the --init weights have it\n", k.c_str());
+          if (dist->is_main()) std::fprintf(stderr, "tokenizer: %s, as the --init weights have it\n", k.c_str());
       opt.vgg = *vgg;
       opt.dino = *dino;
       std::unique_ptr<ProgressBar> bar;
@@ -106,6 +110,7 @@ void register_tokenizer(CLI::App& app) {
           },
           [](const std::string& n) { std::fprintf(stderr, "tokenizer: %s\n", n.c_str()); });
       if (bar) bar->finish();
+      if (!dist->is_main()) return;
       std::printf("tokenizer: step %d%s; last validation %s\n", r.final_step,
                   r.final_step >= (opt.steps > 0 ? opt.steps : c.tokenizer.steps) ? " (done)" : " (checkpointed)",
                   r.last_val.dump().c_str());

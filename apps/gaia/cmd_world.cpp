@@ -65,11 +65,15 @@ void register_world(CLI::App& app) {
                   "with --distill-from: also keep its text-conditioned predictions when half the batch is given other "
                   "examples' captions (prompts that contradict the frames, as text prompting does); ~1.5x step time");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
+    auto par = std::make_shared<ParallelFlags>();
+    add_parallel_flags(cmd, par.get());
     cmd->callback([=] {
       Config c = resolve_config(*flags);
-      apply_threads(c);
       if (flags->out.empty()) fail("gaia world train: --out RUN_DIR is required");
+      if (launch_local_ranks(*par)) return;
+      auto dist = join_job(*par, c);
       world::WorldTrainOptions opt = *o;
+      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer};
       opt.tokens = *tokens;
       opt.format = token_format(*format, c, false);
       opt.out = flags->out;
@@ -87,6 +91,7 @@ void register_world(CLI::App& app) {
           },
           [](const std::string& n) { std::fprintf(stderr, "world: %s\n", n.c_str()); });
       if (bar) bar->finish();
+      if (!dist->is_main()) return;
       const int total = opt.steps > 0 ? opt.steps : c.world.steps;
       std::printf("world: step %d%s; last validation %s\n", r.final_step,
                   r.final_step >= total ? " (done)" : " (checkpointed)", r.last_val.dump().c_str());

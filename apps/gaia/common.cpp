@@ -10,12 +10,16 @@
 #include <regex>
 
 #include <nlohmann/json.hpp>
+#ifndef GAIA_NO_VIDEO
 #include <opencv2/core.hpp>
+#endif
 
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#ifndef GAIA_NO_VIDEO
 #include "gaia/data/motion.h"
+#endif
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
 #include "gaia/world/token_file.h"
@@ -47,6 +51,8 @@ void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help
   cmd->add_option("--config", f->config, "YAML config (configs/tiny.yaml, default.yaml, paper.yaml); default: built-in default");
   cmd->add_option("--set", f->sets, "override a config key, e.g. --set world.d_model=512 (repeatable)");
   cmd->add_option("--device", f->device, "cpu | cuda | cuda:N (default: config run.device)");
+  cmd->add_option("--precision", f->precision,
+                  "fp32 | bf16 | fp16: mixed precision of training and sampling (default: config run.precision)");
   cmd->add_option("--threads", f->threads, "CPU threads (0 = all cores)");
   cmd->add_option("--seed", f->seed, "random seed (default: config run.seed)");
   cmd->add_option("--out", f->out, out_help);
@@ -83,6 +89,7 @@ Config resolve_config(const SharedFlags& f) {
   Config c = f.config.empty() ? Config{} : Config::load(f.config);
   for (auto& kv : f.sets) c.set(kv);
   if (!f.device.empty()) c.run.device = f.device;
+  if (!f.precision.empty()) c.run.precision = f.precision;
   if (f.threads >= 0) c.run.threads = f.threads;
   if (f.seed >= 0) c.run.seed = static_cast<uint64_t>(f.seed);
   static const std::regex dev_re("cpu|cuda(:[0-9]+)?");
@@ -108,6 +115,7 @@ void apply_sampling_sets(const SharedFlags& f, const std::string& section, const
   model_cfg.validate();
 }
 
+#ifndef GAIA_NO_VIDEO
 void add_motion_flags(CLI::App* cmd, data::MotionOptions* m) {
   cmd->add_option("--camera-height", m->camera_height, "camera height above the road in metres, the scale of "
                   "estimated speed (default 1.4, a dashcam behind the mirror; KITTI drives: 1.65)")
@@ -118,6 +126,7 @@ void add_motion_flags(CLI::App* cmd, data::MotionOptions* m) {
   cmd->add_option("--motion-smooth", m->smooth_s, "seconds of the median filter over the per-frame estimates")
       ->check(number_in({0, 10}))->capture_default_str();
 }
+#endif
 
 void add_token_format_flags(CLI::App* cmd, TokenFormatFlags* f) {
   cmd->add_option("--grid", f->grid, "another tokenizer's token grid HxW, for [frames, h*w] arrays (e.g. 8x16)");
@@ -197,7 +206,9 @@ void check_numbers_of(CLI::App* app) {
 void check_numbers(CLI::App& app) { check_numbers_of(&app); }
 
 void apply_threads(const Config& c) {
+#ifndef GAIA_NO_VIDEO
   if (c.run.threads > 0) cv::setNumThreads(c.run.threads);
+#endif
   set_torch_threads(c.run.threads);
 }
 

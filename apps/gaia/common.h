@@ -13,6 +13,10 @@ namespace gaia::data {
 struct MotionOptions;
 }  // namespace gaia::data
 
+namespace gaia::train {
+class Distributed;
+}  // namespace gaia::train
+
 namespace gaia::world {
 struct TokenFormat;
 struct WorldInfo;
@@ -24,12 +28,13 @@ struct SharedFlags {
   std::string config;               // --config FILE (default: built-in defaults = configs/default.yaml)
   std::vector<std::string> sets;    // --set key=value (repeatable)
   std::string device;               // --device cpu|cuda|cuda:N
+  std::string precision;            // --precision fp32|bf16|fp16
   int threads = -1;                 // --threads N
   long long seed = -1;              // --seed N
   std::string out;                  // --out DIR or FILE
 };
 
-// Adds --config/--set/--device/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
+// Adds --config/--set/--device/--precision/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
 void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory");
 
 // The CLI's one rule: data positional, weights by component. Each component's weights flag is declared here, with
@@ -97,6 +102,25 @@ void apply_threads(const Config& c);
 // Runs this gaia binary again as a child process with `args` (after "gaia"), sharing stdout/stderr, and returns
 // its exit status: train-all's stages and demo --from-scratch.
 int run_gaia_child(const std::vector<std::string>& args);
+
+// Data-parallel training (train/distributed.h): --nproc, --accumulate, --shard-optimizer, --dist-timeout.
+struct ParallelFlags {
+  int nproc = 1;
+  int accumulate = 1;
+  bool shard_optimizer = false;
+  double timeout_s = 1800;  // as torch.distributed's default
+};
+void add_parallel_flags(CLI::App* cmd, ParallelFlags* f);
+// With --nproc N > 1 outside a job: runs N ranks of this same command on this machine and returns true once all
+// succeeded (the caller then returns: the ranks did the work); when one fails, stops the others and fails naming it.
+// False when there is nothing to launch (one process, or already a rank of a job).
+bool launch_local_ranks(const ParallelFlags& f);
+// This process's place in the job (a job of one outside any): per-rank device (cuda -> cuda:LOCAL_RANK) and, for
+// ranks sharing this machine, a share of its cores; applies the thread count.
+std::unique_ptr<train::Distributed> join_job(const ParallelFlags& f, Config& c);
+
+// The arguments of this run, as main got them (launch_local_ranks runs them again).
+extern std::vector<std::string> g_args;
 
 // The exact command line of this run (set by main), recorded in reports so that every figure can be remade.
 extern std::string g_command_line;

@@ -105,6 +105,7 @@ int main(int argc, char** argv) {
   ::setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);
   gaia::configure_allocator();
   for (int i = 1; i < argc; ++i) gaia::app::g_command_line += std::string(" ") + argv[i];
+  gaia::app::g_args.assign(argv, argv + argc);
   CLI::App app{"gaia: generative world model for autonomous driving (GAIA-1 in C++)", "gaia"};
   app.set_version_flag("--version", std::string("gaia ") + GAIA_VERSION);
   app.require_subcommand(1);

@@ -16,6 +16,7 @@ std::vector<Config::Field> Config::fields() {
   f.push_back(config_field("run.threads", &run.threads, R, closed(0, 4096)));
   f.push_back(config_field("run.seed", &run.seed, R));
   f.push_back(config_field("run.checkpoint_every", &run.checkpoint_every, R, closed(1, 1e9)));
+  f.push_back(config_field("run.precision", &run.precision, R));
   return f;
 }
 
@@ -58,6 +59,8 @@ void Config::validate() const {
     }
   }
   need(data.height > 0 && data.width > 0, "data.height and data.width must be positive");
+  need(run.precision == "fp32" || run.precision == "bf16" || run.precision == "fp16",
+       fmt::format("run.precision '{}': expected fp32, bf16 or fp16", run.precision));
   need(tokenizer.downsample > 0 && (tokenizer.downsample & (tokenizer.downsample - 1)) == 0,
        "tokenizer.downsample must be a power of two");
   need(data.height % tokenizer.downsample == 0 && data.width % tokenizer.downsample == 0,

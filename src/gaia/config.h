@@ -21,6 +21,7 @@ struct RunConfig {
   int threads = 0;               // 0 = all cores
   uint64_t seed = 0;
   int checkpoint_every = 200;    // steps between checkpoints (resumable training)
+  std::string precision = "fp32"; // fp32 | bf16 | fp16: autocast for training and sampling (torch/precision.h)
 };
 
 struct Config {

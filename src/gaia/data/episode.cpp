@@ -5,8 +5,10 @@
 #include <cmath>
 #include <cstdio>
 
+#ifndef GAIA_NO_VIDEO
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#endif
 
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
@@ -130,6 +132,7 @@ EpisodeWriter::~EpisodeWriter() {
   if (frames_) std::fclose(frames_);
 }
 
+#ifndef GAIA_NO_VIDEO
 void EpisodeWriter::append(const FrameRecord& f) {
   if (f.bgr.type() != CV_8UC3 || f.bgr.rows != meta_.height || f.bgr.cols != meta_.width)
     fail("episode {}: frame {} is {}x{} (type {}), expected {}x{} BGR uint8", meta_.id, times_.size(), f.bgr.rows,
@@ -157,6 +160,7 @@ void EpisodeWriter::append(const FrameRecord& f) {
   labels_.push_back(f.labels);
   if (!f.labels.is_null()) any_labels_ = true;
 }
+#endif
 
 void EpisodeWriter::set_signals(const std::vector<float>& speed, const std::vector<float>& curvature,
                                 const std::vector<float>& confidence, const std::string& source) {
@@ -239,6 +243,7 @@ Episode::Episode(const fs::path& dir) : dir_(dir) {
   }
 }
 
+#ifndef GAIA_NO_VIDEO
 cv::Mat Episode::frame_bgr(int64_t i) const {
   if (i < 0 || i >= meta_.num_frames) fail("{}: frame {} out of range [0, {})", dir_.string(), i, meta_.num_frames);
   const uint8_t* p = frames_->data() + offsets_[static_cast<size_t>(i)];
@@ -254,6 +259,7 @@ cv::Mat Episode::frame_bgr(int64_t i) const {
   }
   return out;
 }
+#endif
 
 Dataset::Dataset(const fs::path& root) : root_(root) {
   if (!fs::exists(root)) fail("{}: no such dataset directory", root.string());

@@ -13,6 +13,8 @@
 //
 // Episodes are written into a staging directory and renamed into place, so a dataset never holds a torn
 // episode. Reading streams: frames are decoded one at a time from a memory map; nothing loads a whole dataset.
+// Frames need OpenCV: a build without video (cmake -DGAIA_WITH_VIDEO=OFF, which defines GAIA_NO_VIDEO) reads
+// episodes' metadata and signals but neither writes nor decodes frames.
 #include <limits>
 #include <map>
 #include <memory>
@@ -21,7 +23,9 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#ifndef GAIA_NO_VIDEO
 #include <opencv2/core.hpp>
+#endif
 
 #include "gaia/core/fs.h"
 
@@ -63,6 +67,7 @@ struct EpisodeMeta {
   bool is_procedural() const { return source.rfind("synth:", 0) == 0; }
 };
 
+#ifndef GAIA_NO_VIDEO
 // Per-frame record handed to the writer. Frames are BGR CV_8UC3 (OpenCV's convention) of the episode's size.
 struct FrameRecord {
   cv::Mat bgr;
@@ -72,6 +77,7 @@ struct FrameRecord {
   std::string caption;
   nlohmann::json labels;  // null when absent
 };
+#endif
 
 // Creates DATASET/dataset.json if needed (atomically) and checks an existing one.
 void ensure_dataset(const fs::path& dataset);
@@ -81,7 +87,9 @@ class EpisodeWriter {
   // Streams frames to a staging directory inside DATASET/episodes; commit() renames it into place.
   EpisodeWriter(const fs::path& dataset, EpisodeMeta meta, bool overwrite = false);
   ~EpisodeWriter();
+#ifndef GAIA_NO_VIDEO
   void append(const FrameRecord& f);
+#endif
   int64_t frames_written() const { return static_cast<int64_t>(times_.size()); }
   void commit();  // throws if no frames were written
   const EpisodeMeta& meta() const { return meta_; }
@@ -112,7 +120,9 @@ class Episode {
   explicit Episode(const fs::path& dir);  // validates sizes of every array against num_frames
   const EpisodeMeta& meta() const { return meta_; }
   int64_t size() const { return meta_.num_frames; }
+#ifndef GAIA_NO_VIDEO
   cv::Mat frame_bgr(int64_t i) const;  // random access, decoded on demand
+#endif
   double time_s(int64_t i) const { return times_.at(static_cast<size_t>(i)); }
   float speed(int64_t i) const { return speed_.at(static_cast<size_t>(i)); }
   float curvature(int64_t i) const { return curvature_.at(static_cast<size_t>(i)); }

@@ -13,10 +13,12 @@
 #include "gaia/eval/metrics.h"
 #include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/io.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/ema.h"
 #include "gaia/train/optim.h"
+#include "gaia/train/parallel_adamw.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
 
@@ -109,12 +111,20 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   const auto& dc = cfg.decoder;
   const torch::Device dev = parse_device(cfg.run.device);
   DecoderTrainResult result;
+  train::Distributed one;
+  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
-    if (on_note) on_note(s);
+    if (on_note && main) on_note(s);
   };
+  const int accumulate = opt.parallel.accumulate;
+  const int64_t micro = opt.parallel.micro_batch(dc.batch_size, "decoder.batch_size");
   // Weights, gradients, AdamW's two moments and the EMA copy in float32, before any of it is allocated.
   sizing::check_memory(20.0 * double(sizing::decoder_params(cfg).total), "training this video decoder (decoder.*)");
-  train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
+  // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
+  std::unique_ptr<train::RunDir> run_dir;
+  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
+  dist.barrier();
   auto tok = tokenizer::load_tokenizer(opt.tokenizer, dev);
   for (auto& p : tok->parameters()) p.set_requires_grad(false);
   const int64_t K = tok->cfg.codebook_size, D = tok->cfg.downsample;
@@ -145,7 +155,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   model->to(dev);
   ema->to(dev);
   train::ema_copy(*ema, *model);
-  auto optim = train::make_adamw(model->parameters(), dc.lr, dc.weight_decay, dc.beta1, dc.beta2);
+  train::ParallelAdamW optim(model->parameters(), {dc.lr, dc.weight_decay, dc.beta1, dc.beta2}, dist,
+                             opt.parallel.shard_optimizer);
   const int total = opt.steps > 0 ? opt.steps : dc.steps;
   train::WarmupCosine sched{dc.lr, dc.final_lr, dc.warmup_steps, total};
   NoiseSchedule noise{-15.0, 15.0, dc.schedule_shift};
@@ -155,7 +166,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   int step = 0;
   if (train::has_checkpoint(ckpt)) {
     auto st = train::load_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}},
-                                     {{"decoder", optim.get()}});
+                                     {{"decoder", &optim.to_load()}});
+    optim.loaded();
     step = st.step;
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
@@ -169,12 +181,17 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     note("initialised from " + opt.init.string());
     if (!dropped.empty()) note(dropped);
   }
-  fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
+  if (main) fs::create_directories(opt.out);
+  train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
+                       opt.stop_after);
   auto save = [&]() {
-    train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", optim.get()}},
-                           {step, {{"config", cfg.name}}});
-    save_decoder(ema, cfg, opt.out / "latest.safetensors");  // usable EMA weights so far (gaia decode, decoder eval)
+    auto& state = optim.gathered();  // every rank: a sharded state comes together on rank 0
+    if (main) {
+      train::save_checkpoint(ckpt, {{"decoder", model.ptr().get()}, {"ema", ema.ptr().get()}}, {{"decoder", &state}},
+                             {step, {{"config", cfg.name}}});
+      save_decoder(ema, cfg, opt.out / "latest.safetensors");  // usable EMA weights so far (gaia decode, decoder eval)
+    }
+    optim.release();
   };
   // Validation: v loss of the EMA weights on fixed held-out clips (video task, 6.25 Hz) at t' = 0.25, 0.5, 0.75
   // of the trained range (decoder.train_max_time) with fixed noise, and the PSNR of the one-step estimate x_hat at
@@ -193,7 +210,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       auto vp = ema->forward(b.input);
       loss += v_loss(vp, b.v_true, b.weight, dc.w_l1, dc.w_l2).item<double>() / 3;
       if (f == 0.5) {
-        auto tt = torch::full({1}, t);
+        auto tt = torch::full({1}, t, vp.options().dtype(torch::kFloat));
         auto x_hat = x_from_v(b.input.x, vp, noise.alpha(tt), noise.sigma(tt)) + coarse_base(b.input.cond_image, clips.frames);
         psnr = psnr_pm1(x_hat, clips.frames);
       }
@@ -203,6 +220,8 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     return v;
   };
 
+  const Precision precision = precision_for(cfg.run.precision, dev);
+  LossScaler scaler(precision);
   model->train();
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
@@ -213,21 +232,36 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     std::vector<ClipRef> refs;
     std::uniform_int_distribution<size_t> pick(0, pool.size() - 1);
     for (int i = 0; i < dc.batch_size; ++i) refs.push_back(pool[pick(rng)]);
-    auto clips = load_clips(train.episodes, refs, tok, dc.cond_image, dev);
     const double t = std::uniform_real_distribution<double>(0.0, dc.train_max_time)(rng);
-    auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D,
-                             dc.interp_base);
     const double lr = sched(step);
-    train::set_lr(*optim, lr);
-    auto v_pred = model->forward(b.input);
-    auto loss = v_loss(v_pred, b.v_true, b.weight, dc.w_l1, dc.w_l2);
-    if (dc.w_temporal > 0) loss = loss + dc.w_temporal * temporal_v_loss(v_pred, b.v_true, b.weight);
-    const double lv = loss.item<double>();
+    optim.set_lr(lr);
+    optim.zero_grad();
+    double lv = 0;
+    // This rank's micro-batches of the step's clips: only those are loaded and encoded.
+    for (int k = 0; k < accumulate; ++k) {
+      const int64_t b0 = opt.parallel.micro_offset(dc.batch_size, k);
+      std::vector<ClipRef> mine(refs.begin() + b0, refs.begin() + b0 + micro);
+      if (accumulate > 1 || dist.size() > 1)
+        torch::manual_seed(train::step_seed(cfg.run.seed, step, 1 + opt.parallel.micro_stream(k)));
+      auto clips = load_clips(train.episodes, mine, tok, dc.cond_image, dev);
+      auto b = make_task_batch(clips, task_masks(draw.task, T), draw.rate, t, dc.token_dropout, noise, K, D,
+                               dc.interp_base);
+      torch::Tensor loss;
+      {
+        Autocast autocast(precision, dev);
+        auto v_pred = model->forward(b.input).to(torch::kFloat);
+        loss = v_loss(v_pred, b.v_true, b.weight, dc.w_l1, dc.w_l2);
+        if (dc.w_temporal > 0) loss = loss + dc.w_temporal * temporal_v_loss(v_pred, b.v_true, b.weight);
+      }
+      lv += loss.item<double>() / accumulate;
+      const double factor = scaler.scale() / accumulate;  // fp16 scales the loss
+      (factor != 1 ? loss * factor : loss).backward();
+    }
+    lv = dist.sum(lv) / dist.size();
     if (!std::isfinite(lv)) fail("video decoder training diverged at step {} (loss is not finite)", step);
-    optim->zero_grad();
-    loss.backward();
-    const double gn = train::clip_grad_norm(model->parameters(), dc.grad_clip);
-    optim->step();
+    const double gn = optim.step(dc.grad_clip, scaler.scale());
+    if (!scaler.update(std::isfinite(gn)) && !scaler.active())
+      fail("video decoder training diverged at step {} (the gradient is not finite)", step);
     train::ema_update(*ema, *model, dc.ema_decay, step);
     ++step;
     DecoderStepLog log;
@@ -238,18 +272,18 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     log.grad_norm = gn;
     log.task = to_string(draw.task) + "@" + fmt::format("{}Hz", kRates[draw.rate]);
     log.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (loop.validate_now(step, opt.val_every)) {
+    if (main && loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
     }
     const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn}, {"task", log.task},
                                {"t", t}, {"seconds", log.seconds}, {"val", log.val}});
-    if (on_step) on_step(log);
+    if (on_step && main) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
-  if (step >= total) save_decoder(ema, cfg, opt.out / "decoder.safetensors");
+  if (main && step >= total) save_decoder(ema, cfg, opt.out / "decoder.safetensors");
   return result;
 }
 

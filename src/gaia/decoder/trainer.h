@@ -15,6 +15,7 @@
 #include "gaia/decoder/tasks.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/tokenizer/autoencoder.h"
+#include "gaia/train/distributed.h"
 
 namespace gaia::decoder {
 
@@ -50,6 +51,9 @@ struct DecoderTrainOptions {
   int val_every = 250;
   int val_clips = 8;
   int stop_after = -1;               // stop (with a checkpoint) after this many steps in this run; for tests
+  // Data-parallel ranks, gradient accumulation, sharded optimiser state (train/distributed.h): each rank loads its
+  // own clips of the step's batch. Rank 0 alone writes OUT, validates and reports.
+  train::Parallel parallel;
 };
 
 struct DecoderStepLog {

@@ -3,12 +3,15 @@
 #include <algorithm>
 #include <cmath>
 
+#ifndef GAIA_NO_VIDEO
 #include <opencv2/imgproc.hpp>
+#endif
 
 #include "gaia/core/error.h"
 
 namespace gaia::eval {
 
+#ifndef GAIA_NO_VIDEO
 double psnr(const cv::Mat& a, const cv::Mat& b) {
   if (a.size() != b.size() || a.type() != b.type()) fail("psnr: images differ in size or type");
   cv::Mat d;
@@ -48,6 +51,7 @@ double ssim(const cv::Mat& a, const cv::Mat& b) {
   for (int c = 0; c < a.channels(); ++c) total += m[c];
   return total / a.channels();
 }
+#endif
 
 CodeStats code_stats(const std::vector<int64_t>& counts) {
   CodeStats s;

@@ -4,12 +4,16 @@
 #include <cstdint>
 #include <vector>
 
+#ifndef GAIA_NO_VIDEO
 #include <opencv2/core.hpp>
+#endif
 
 namespace gaia::eval {
 
+#ifndef GAIA_NO_VIDEO  // a build without video has no images (data/episode.h)
 double psnr(const cv::Mat& a, const cv::Mat& b);  // 8-bit images of the same size; 99 dB when identical
 double ssim(const cv::Mat& a, const cv::Mat& b);  // mean SSIM over channels, Gaussian window 11 / sigma 1.5
+#endif
 
 struct CodeStats {
   double usage = 0;       // fraction of the K codes used at least once

@@ -1,5 +1,7 @@
 #include "gaia/tokenizer/quantizer.h"
 
+#include "gaia/torch/precision.h"
+
 namespace gaia::tokenizer {
 
 namespace F = torch::nn::functional;
@@ -16,7 +18,10 @@ torch::Tensor VectorQuantizerImpl::normalized_codebook() const {
   return F::normalize(codebook->weight, F::NormalizeFuncOptions().dim(1));
 }
 
-QuantizerOutput VectorQuantizerImpl::forward(const torch::Tensor& z) {
+QuantizerOutput VectorQuantizerImpl::forward(const torch::Tensor& z_in) {
+  // The nearest code in float32 under any autocast: in bf16, near-equal cosines pick the wrong code.
+  Autocast fp32(Precision::kFp32, z_in.device());
+  const auto z = z_in.to(torch::kFloat);
   const auto B = z.size(0), h = z.size(2), w = z.size(3);
   auto ze = proj_in(z.permute({0, 2, 3, 1}).reshape({-1, z.size(1)}));   // [N, code_dim]
   ze = F::normalize(ze, F::NormalizeFuncOptions().dim(1));
@@ -46,7 +51,8 @@ int64_t VectorQuantizerImpl::restart_dead_codes(const torch::Tensor& usage, cons
   if (n == 0 || z_e.size(0) == 0) return 0;
   auto pick = torch::randint(z_e.size(0), {n}, gen, torch::TensorOptions().dtype(torch::kLong).device(z_e.device()));
   auto noise = torch::randn({n, code_dim}, gen, z_e.options()) * 0.01;
-  codebook->weight.index_copy_(0, dead.to(codebook->weight.device()), z_e.index_select(0, pick) + noise);
+  const auto dev = codebook->weight.device();  // the encoder outputs and draws may be on the CPU
+  codebook->weight.index_copy_(0, dead.to(dev), (z_e.index_select(0, pick) + noise).to(dev, codebook->weight.scalar_type()));
   return n;
 }
 

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <map>
+#include <optional>
 #include <random>
 
 #include "gaia/core/dtype.h"
@@ -15,10 +17,12 @@
 #include "gaia/tokenizer/discriminator.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/teachers.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/ema.h"
 #include "gaia/train/optim.h"
+#include "gaia/train/parallel_adamw.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
 
@@ -45,14 +49,22 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   const auto& tc = cfg.tokenizer;
   const torch::Device dev = parse_device(cfg.run.device);
   TrainResult result;
+  train::Distributed one;
+  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
     result.notes.push_back(s);
-    if (on_note) on_note(s);
+    if (on_note && main) on_note(s);
   };
+  const int accumulate = opt.parallel.accumulate;
+  const int64_t micro = opt.parallel.micro_batch(tc.batch_size, "tokenizer.batch_size");
   // Weights, gradients and AdamW's two moments in float32 (tokenizer and discriminator), before any is allocated.
   sizing::check_memory(16.0 * double(sizing::tokenizer_params(cfg).total + sizing::discriminator_params(cfg)),
                      "training this tokenizer (tokenizer.*)");
-  train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
+  // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
+  std::unique_ptr<train::RunDir> run_dir;
+  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
+  dist.barrier();
 
   data::Dataset ds(opt.dataset);
   data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
@@ -99,8 +111,10 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     for (auto& p : model->encoder->parameters()) p.set_requires_grad(false);
     for (auto& p : model->quantizer->parameters()) p.set_requires_grad(false);
   }
-  auto opt_g = train::make_adamw(opt.decoder_only ? model->decoder->parameters() : model->parameters(), tc.lr, tc.weight_decay, tc.beta1, tc.beta2);
-  auto opt_d = train::make_adamw(disc->parameters(), tc.lr, tc.weight_decay, tc.beta1, tc.beta2);
+  const train::AdamWSettings adamw{tc.lr, tc.weight_decay, tc.beta1, tc.beta2};
+  train::ParallelAdamW opt_g(opt.decoder_only ? model->decoder->parameters() : model->parameters(), adamw, dist,
+                             opt.parallel.shard_optimizer);
+  train::ParallelAdamW opt_d(disc->parameters(), adamw, dist, opt.parallel.shard_optimizer);
   const int total = opt.steps > 0 ? opt.steps : tc.steps;
   train::WarmupCosine sched{tc.lr, tc.final_lr, tc.warmup_steps, total};
 
@@ -116,9 +130,12 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     if (!average_from_here) modules.emplace_back("ema", averaged.ptr().get());
   }
   if (train::has_checkpoint(ckpt)) {
-    auto st = train::load_checkpoint(ckpt, modules, {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}});
+    auto st = train::load_checkpoint(ckpt, modules,
+                                     {{"tokenizer", &opt_g.to_load()}, {"discriminator", &opt_d.to_load()}});
+    opt_g.loaded();
+    opt_d.loaded();
     step = st.step;
-    usage = st.extra.value("usage", usage);
+    if (main) usage = st.extra.value("usage", usage);  // the ranks' counts are summed: rank 0 carries the saved ones
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
     if (average_from_here) {
@@ -139,13 +156,27 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     if (!dropped.empty()) note(dropped);
   }
   if (averaged && !result.resumed) train::ema_copy(*averaged, *model);
-  fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
-
+  if (main) fs::create_directories(opt.out);
+  train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
+                       opt.stop_after);
+  // Code usage over every rank's frames since the last restart.
+  auto total_usage = [&]() {
+    auto u = torch::tensor(std::vector<double>(usage.begin(), usage.end()), torch::kDouble);
+    dist.sum(u);
+    return u.to(torch::kLong);
+  };
   auto save = [&]() {
-    nlohmann::json extra = {{"usage", usage}, {"config", cfg.name}};
-    std::vector<std::pair<std::string, const torch::nn::Module*>> out(modules.begin(), modules.end());
-    train::save_checkpoint(ckpt, out, {{"tokenizer", opt_g.get()}, {"discriminator", opt_d.get()}}, {step, extra});
+    auto u = total_usage();
+    auto& g = opt_g.gathered();  // every rank: a sharded state comes together on rank 0
+    auto& d = opt_d.gathered();
+    if (main) {
+      nlohmann::json extra = {{"usage", std::vector<int64_t>(u.data_ptr<int64_t>(), u.data_ptr<int64_t>() + u.numel())},
+                              {"config", cfg.name}};
+      std::vector<std::pair<std::string, const torch::nn::Module*>> out(modules.begin(), modules.end());
+      train::save_checkpoint(ckpt, out, {{"tokenizer", &g}, {"discriminator", &d}}, {step, extra});
+    }
+    opt_g.release();
+    opt_d.release();
   };
 
   // The tokenizer that is validated and saved: the model, or its decoder average with the model's encoder, codebook
@@ -189,88 +220,130 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     return v;
   };
 
+  const Precision precision = precision_for(cfg.run.precision, dev);
+  LossScaler scaler(precision);
   model->train();
   disc->train();
   std::vector<torch::Tensor> recent_codes;
   while (step < total) {
     std::mt19937_64 rng(train::step_seed(cfg.run.seed, step));
     torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
-    auto x = batch_tensor(train, train.sample(static_cast<size_t>(tc.batch_size), rng), dev);
+    const auto picks = train.sample(static_cast<size_t>(tc.batch_size), rng);
     double lr = sched(step);
-    train::set_lr(*opt_g, lr);
-    train::set_lr(*opt_d, lr);
-
-    auto o = model->forward(x);
-    auto l1 = (o.reconstruction - x).abs().mean();
-    auto l2 = (o.reconstruction - x).pow(2).mean();
-    auto loss = tc.w_l1 * l1 + tc.w_l2 * l2;
-    if (!opt.decoder_only) loss = loss + tc.w_codebook * (o.q.codebook_loss + tc.commitment * o.q.commit_loss);
-    nlohmann::json terms = {{"l1", l1.item<double>()}, {"l2", l2.item<double>()},
-                            {"codebook", o.q.codebook_loss.item<double>()}};
-    if (vgg) {
-      auto lp = perceptual_loss(*vgg, o.reconstruction, x);
-      loss = loss + tc.w_perceptual * lp;
-      terms["perceptual"] = lp.item<double>();
-    }
-    if (dino) {
-      torch::Tensor target;
-      {
-        torch::NoGradGuard ng;
-        target = (*dino)->forward(x);  // [B, Dd, h', w'] -> resized to the token grid
-        target = F::interpolate(target, F::InterpolateFuncOptions()
-                                            .size(std::vector<int64_t>{o.q.codes.size(2), o.q.codes.size(3)})
-                                            .mode(torch::kBilinear).align_corners(false));
-      }
-      auto pred = model->dino_head(o.q.codes.permute({0, 2, 3, 1})).permute({0, 3, 1, 2});
-      auto ld = (1 - F::cosine_similarity(pred, target, F::CosineSimilarityFuncOptions().dim(1))).mean();
-      loss = loss + tc.w_dino * ld;
-      terms["dino"] = ld.item<double>();
-    }
+    opt_g.set_lr(lr);
+    opt_d.set_lr(lr);
+    opt_g.zero_grad();
     const bool gan = step >= tc.disc_start && tc.w_gan > 0;
-    if (gan) {
-      auto lg = hinge_g_loss(disc->forward(o.reconstruction));
-      double w = tc.w_gan;
-      if (tc.gan_adaptive) {
-        // VQGAN: ||d loss_rec / d W_last|| / ||d loss_gan / d W_last||, W_last = the decoder's output convolution.
-        auto last = model->decoder->conv_out->weight;
-        auto g_rec = torch::autograd::grad({loss}, {last}, {}, /*retain_graph=*/true)[0];
-        auto g_gan = torch::autograd::grad({lg}, {last}, {}, /*retain_graph=*/true)[0];
-        double lambda = std::clamp(g_rec.norm().item<double>() / (g_gan.norm().item<double>() + 1e-4), 0.0, 1e4);
-        w *= lambda;
-        terms["gan_weight"] = w;
+    // This rank's micro-batches of the step's frames; the discriminator's step needs them again after the
+    // tokenizer's.
+    std::vector<std::pair<torch::Tensor, torch::Tensor>> seen;  // (frames, reconstruction) per micro-batch
+    std::map<std::string, double> sums;  // loss terms summed over the micro-batches
+    torch::Tensor x;
+    for (int k = 0; k < accumulate; ++k) {
+      const int64_t b0 = opt.parallel.micro_offset(tc.batch_size, k);
+      if (accumulate > 1 || dist.size() > 1)
+        torch::manual_seed(train::step_seed(cfg.run.seed, step, 1 + opt.parallel.micro_stream(k)));
+      x = batch_tensor(train, std::vector<std::pair<size_t, int64_t>>(picks.begin() + b0, picks.begin() + b0 + micro), dev);
+      std::optional<Autocast> autocast(std::in_place, precision, dev);  // the forward passes; backward after it
+      auto o = model->forward(x);
+      auto l1 = (o.reconstruction - x).abs().mean();
+      auto l2 = (o.reconstruction - x).pow(2).mean();
+      auto loss = tc.w_l1 * l1 + tc.w_l2 * l2;
+      if (!opt.decoder_only) loss = loss + tc.w_codebook * (o.q.codebook_loss + tc.commitment * o.q.commit_loss);
+      sums["l1"] += l1.item<double>();
+      sums["l2"] += l2.item<double>();
+      sums["codebook"] += o.q.codebook_loss.item<double>();
+      if (vgg) {
+        auto lp = perceptual_loss(*vgg, o.reconstruction, x);
+        loss = loss + tc.w_perceptual * lp;
+        sums["perceptual"] += lp.item<double>();
       }
-      loss = loss + w * lg;
-      terms["gan_g"] = lg.item<double>();
-    }
-    if (!std::isfinite(loss.item<double>())) fail("tokenizer training diverged at step {} (loss is not finite)", step);
-    opt_g->zero_grad();
-    loss.backward();
-    opt_g->step();
-    if (gan) {
-      auto ld = hinge_d_loss(disc->forward(x), disc->forward(o.reconstruction.detach()));
-      opt_d->zero_grad();
-      ld.backward();
-      opt_d->step();
-      terms["gan_d"] = ld.item<double>();
-    }
-    terms["loss"] = loss.item<double>();
-
-    // Code usage since the last restart; unused codes are re-seeded from recent encoder outputs.
-    {
+      if (dino) {
+        torch::Tensor target;
+        {
+          torch::NoGradGuard ng;
+          target = (*dino)->forward(x);  // [B, Dd, h', w'] -> resized to the token grid
+          target = F::interpolate(target, F::InterpolateFuncOptions()
+                                              .size(std::vector<int64_t>{o.q.codes.size(2), o.q.codes.size(3)})
+                                              .mode(torch::kBilinear).align_corners(false));
+        }
+        auto pred = model->dino_head(o.q.codes.permute({0, 2, 3, 1})).permute({0, 3, 1, 2});
+        auto ld = (1 - F::cosine_similarity(pred, target, F::CosineSimilarityFuncOptions().dim(1))).mean();
+        loss = loss + tc.w_dino * ld;
+        sums["dino"] += ld.item<double>();
+      }
+      torch::Tensor lg;
+      if (gan) lg = hinge_g_loss(disc->forward(o.reconstruction));
+      autocast.reset();
+      if (gan) {
+        double w = tc.w_gan;
+        if (tc.gan_adaptive) {
+          // VQGAN: ||d loss_rec / d W_last|| / ||d loss_gan / d W_last||, W_last = the decoder's output convolution
+          // (the gradients averaged over the ranks: on one micro-batch per rank, those of the whole batch).
+          auto last = model->decoder->conv_out->weight;
+          auto g_rec = torch::autograd::grad({loss}, {last}, {}, /*retain_graph=*/true)[0];
+          auto g_gan = torch::autograd::grad({lg}, {last}, {}, /*retain_graph=*/true)[0];
+          dist.average(g_rec);
+          dist.average(g_gan);
+          double lambda = std::clamp(g_rec.norm().item<double>() / (g_gan.norm().item<double>() + 1e-4), 0.0, 1e4);
+          w *= lambda;
+          sums["gan_weight"] += w;
+        }
+        loss = loss + w * lg;
+        sums["gan_g"] += lg.item<double>();
+        seen.emplace_back(x, o.reconstruction.detach());
+      }
+      sums["loss"] += loss.item<double>();
+      const double factor = scaler.scale() / accumulate;  // fp16 scales the loss
+      (factor != 1 ? loss * factor : loss).backward();
+      // Code usage since the last restart; unused codes are re-seeded from recent encoder outputs.
       auto idx = o.q.indices.reshape({-1}).to(torch::kCPU);
       auto acc = idx.accessor<int64_t, 1>();
       for (int64_t i = 0; i < idx.size(0); ++i) usage[static_cast<size_t>(acc[i])]++;
+    }
+    nlohmann::json terms;
+    if (scaler.active()) terms["loss_scale"] = scaler.scale();
+    for (const auto& [name, v] : sums) terms[name] = dist.sum(v / accumulate) / dist.size();
+    if (!std::isfinite(terms["loss"].get<double>()))
+      fail("tokenizer training diverged at step {} (loss is not finite)", step);
+    if (!scaler.update(std::isfinite(opt_g.step(-1, scaler.scale())))) terms["skipped"] = true;  // an fp16 overflow
+    if (gan) {
+      opt_d.zero_grad();
+      double d_loss = 0;
+      for (const auto& [frames, recon] : seen) {
+        torch::Tensor ld;
+        {
+          Autocast autocast(precision, dev);
+          ld = hinge_d_loss(disc->forward(frames), disc->forward(recon));
+        }
+        d_loss += ld.item<double>() / accumulate;
+        const double factor = scaler.scale() / accumulate;
+        (factor != 1 ? ld * factor : ld).backward();
+      }
+      opt_d.step(-1, scaler.scale());
+      terms["gan_d"] = dist.sum(d_loss) / dist.size();
     }
     if (averaged) train::ema_update(*averaged->decoder, *model->decoder, tc.ema_decay, step);
     ++step;
     if (opt.restart_every > 0 && !opt.decoder_only && step % opt.restart_every == 0 && step < total) {
       torch::NoGradGuard ng;
-      auto ze = F::normalize(model->quantizer->proj_in(model->encoder->forward(x).permute({0, 2, 3, 1}).reshape({-1, tc.z_channels})),
-                             F::NormalizeFuncOptions().dim(1));
-      auto u = torch::tensor(usage, torch::kLong).to(dev);
-      auto gen = at::detail::createCPUGenerator(train::step_seed(cfg.run.seed, step, 2));
-      int64_t n = model->quantizer->restart_dead_codes(u.to(torch::kCPU), ze.to(torch::kCPU), gen);
-      terms["restarted_codes"] = n;
+      // Usage over every rank; rank 0 restarts from its frames and sends the codebook to the others.
+      auto u = total_usage();
+      double n = 0;
+      if (main) {
+        auto ze = F::normalize(
+            model->quantizer->proj_in(model->encoder->forward(x).permute({0, 2, 3, 1}).reshape({-1, tc.z_channels})),
+            F::NormalizeFuncOptions().dim(1));
+        auto gen = at::detail::createCPUGenerator(train::step_seed(cfg.run.seed, step, 2));
+        n = double(model->quantizer->restart_dead_codes(u, ze.to(torch::kCPU), gen));
+      }
+      if (dist.size() > 1) {
+        std::vector<torch::Tensor> codebook;
+        for (auto& t : model->quantizer->parameters()) codebook.push_back(t);
+        for (auto& t : model->quantizer->buffers()) codebook.push_back(t);
+        dist.broadcast(codebook, 0);
+      }
+      terms["restarted_codes"] = int64_t(dist.sum(n));
       std::fill(usage.begin(), usage.end(), 0);
     }
 
@@ -279,17 +352,17 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     log.total = total;
     log.lr = lr;
     log.losses = terms;
-    if (loop.validate_now(step, opt.val_every)) {
+    if (main && loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
     }
     const nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"losses", terms}, {"val", log.val}});
-    if (on_step) on_step(log);
+    if (on_step && main) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
-  if (step >= total) save_tokenizer(final_model(), cfg, opt.out / "tokenizer.safetensors");
+  if (main && step >= total) save_tokenizer(final_model(), cfg, opt.out / "tokenizer.safetensors");
   return result;
 }
 

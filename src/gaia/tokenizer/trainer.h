@@ -9,6 +9,7 @@
 
 #include "gaia/config.h"
 #include "gaia/core/fs.h"
+#include "gaia/train/distributed.h"
 
 namespace gaia::tokenizer {
 
@@ -24,6 +25,9 @@ struct TrainOptions {
   // every frame keeps exactly the codes of the --init weights and token datasets made with them stay valid.
   bool decoder_only = false;
   int stop_after = -1;            // stop (with a checkpoint) after this many steps in this run; for tests
+  // Data-parallel ranks, gradient accumulation, sharded optimiser state (train/distributed.h). Code usage is summed
+  // over the ranks; rank 0 restarts dead codes and sends the codebook. Rank 0 alone writes OUT, validates, reports.
+  train::Parallel parallel;
 };
 
 struct StepLog {

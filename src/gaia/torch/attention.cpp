@@ -44,7 +44,8 @@ torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const to
   }
   auto out = lead;
   out.insert(out.end(), {Lq, v.size(-1)});
-  return torch::bmm(torch::softmax(att, -1), v3).view(out);
+  // Softmax statistics in float32 under bf16 / fp16 autocast (a no-op in float32).
+  return torch::bmm(torch::softmax(att, -1, torch::kFloat).to(v3.scalar_type()), v3).view(out);
 }
 
 }  // namespace gaia

@@ -24,14 +24,17 @@ void truncate_after(const fs::path& file, int last) {
 
 StepLoop::StepLoop(const fs::path& metrics_jsonl, int start_step, int total, int checkpoint_every, int stop_after)
     : total_(total), checkpoint_every_(checkpoint_every), stop_after_(stop_after) {
+  if (metrics_jsonl.empty()) return;
   truncate_after(metrics_jsonl, start_step);
   metrics_.open(metrics_jsonl, std::ios::app);
 }
 
 bool StepLoop::end_step(int step, const nlohmann::json& record, const std::function<void()>& save) {
   ++steps_this_run_;
-  metrics_ << record.dump() << "\n";
-  metrics_.flush();
+  if (metrics_.is_open()) {
+    metrics_ << record.dump() << "\n";
+    metrics_.flush();
+  }
   const bool stop = (stop_after_ > 0 && steps_this_run_ >= stop_after_) || step >= total_;
   if ((checkpoint_every_ > 0 && step % checkpoint_every_ == 0) || stop) save();
   return stop;

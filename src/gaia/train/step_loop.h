@@ -14,7 +14,8 @@ namespace gaia::train {
 
 class StepLoop {
  public:
-  // start_step: the step the run starts (or resumes) from; records of later steps are removed from the file.
+  // start_step: the step the run starts (or resumes) from; records of later steps are removed from the file. An
+  // empty path writes no records (the ranks of a data-parallel job other than rank 0).
   StepLoop(const fs::path& metrics_jsonl, int start_step, int total, int checkpoint_every, int stop_after);
   bool validate_now(int step, int val_every) const { return (val_every > 0 && step % val_every == 0) || step == total_; }
   // After step `step` (1-based count of finished steps): logs, saves if due; true = stop this run.

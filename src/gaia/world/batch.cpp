@@ -21,6 +21,13 @@ WorldBatch WorldBatch::slice_steps(int64_t t0, int64_t t1) const {
                     steps_of(text_emb, t0, t1), use_action, use_text};
 }
 
+WorldBatch WorldBatch::examples(int64_t b0, int64_t b1) const {
+  if (!(0 <= b0 && b0 < b1 && b1 <= batch()))
+    fail("examples: [{}, {}) is not a range of the batch's {} examples", b0, b1, batch());
+  auto part = [&](const torch::Tensor& t) { return t.defined() ? t.slice(0, b0, b1) : t; };
+  return WorldBatch{part(tokens), part(actions), part(text_ids), part(text_emb), part(use_action), part(use_text)};
+}
+
 WorldBatch WorldBatch::with_rolled_text(int64_t n) const {
   if (!text_ids.defined() && !text_emb.defined()) fail("with_rolled_text: the batch has no text");
   if (!(1 <= n && n <= batch())) fail("with_rolled_text: {} examples asked of a batch of {}", n, batch());

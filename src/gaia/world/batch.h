@@ -26,6 +26,8 @@ struct WorldBatch {
   // Steps [t0, t1) of every per-step field (tokens, actions, text); the per-example masks are kept whole, and
   // undefined fields stay undefined. The slices are views (no copy).
   WorldBatch slice_steps(int64_t t0, int64_t t1) const;
+  // Examples [b0, b1) of every field (views): a rank's or a micro-batch's share of a step's batch.
+  WorldBatch examples(int64_t b0, int64_t b1) const;
   // The first n examples, each given the text of the example after it (the last one the first one's), with text on
   // and actions off: text prompts that may contradict the frames, as text prompting at inference does (§5.1).
   // Needs text (ids or embeddings) and 1 <= n <= batch().

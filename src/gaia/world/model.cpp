@@ -173,7 +173,8 @@ int64_t WorldModelImpl::parameter_count(bool with_word_embedding) const {
 }
 
 torch::Tensor image_token_loss(const torch::Tensor& logits, const torch::Tensor& tokens) {
-  return F::cross_entropy(logits.reshape({-1, logits.size(-1)}), tokens.reshape({-1}).to(torch::kLong));
+  // In float32 whatever the compute precision: log-softmax over K in bf16 loses the small probabilities.
+  return F::cross_entropy(logits.reshape({-1, logits.size(-1)}).to(torch::kFloat), tokens.reshape({-1}).to(torch::kLong));
 }
 
 }  // namespace gaia::world

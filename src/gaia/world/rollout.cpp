@@ -157,7 +157,7 @@ RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const Roll
     auto h = model->body(model->embed_text(sb, win).view({B, L.m, d}), &cache);
     auto last = h.select(1, h.size(1) - 1);  // [B, d]
     for (int64_t i = 0; i < n; ++i) {
-      auto lg = model->logits(last);  // [B, K]
+      auto lg = model->logits(last).to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
       if (k > 0 && model->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
         lg = with_copy_bias(lg, all.select(1, k - 1).select(1, i), model->cfg.copy_bias);
       torch::Tensor tok;

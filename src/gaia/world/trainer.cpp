@@ -8,9 +8,11 @@
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
 #include "gaia/sizing/sizing.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/checkpoint.h"
 #include "gaia/train/optim.h"
+#include "gaia/train/parallel_adamw.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
 #include "gaia/world/distill.h"
@@ -46,13 +48,21 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const auto& wc = cfg.world;
   const torch::Device dev = parse_device(cfg.run.device);
   WorldTrainResult result;
+  train::Distributed one;
+  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
     result.notes.push_back(s);
-    if (on_note) on_note(s);
+    if (on_note && main) on_note(s);
   };
+  const int accumulate = opt.parallel.accumulate;
+  const int64_t micro = opt.parallel.micro_batch(wc.batch_size, "world.batch_size");
   // Weights, gradients and AdamW's two moments in float32, before any of it is allocated.
   sizing::check_memory(16.0 * double(sizing::world_params(cfg).total), "training this world model (world.*)");
-  train::RunDir run_dir(opt.out, note);  // one run per --out; a checkpoint a kill broke is put back
+  // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
+  std::unique_ptr<train::RunDir> run_dir;
+  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
+  dist.barrier();
 
   // gaia tokenize's datasets state K in dataset.json; other tokenizers' files take it from the format or the
   // config, never from their largest id.
@@ -91,7 +101,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
   model->to(dev);
   auto trained = trained_parameters(*model, opt.train_only);
-  auto optim = train::make_adamw(trained, wc.lr, wc.weight_decay, wc.beta1, wc.beta2);
+  train::ParallelAdamW optim(trained, {wc.lr, wc.weight_decay, wc.beta1, wc.beta2}, dist, opt.parallel.shard_optimizer);
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
@@ -111,7 +121,8 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   fs::path ckpt = opt.out / "checkpoint";
   int step = 0;
   if (train::has_checkpoint(ckpt)) {
-    auto st = train::load_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}});
+    auto st = train::load_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", &optim.to_load()}});
+    optim.loaded();
     step = st.step;
     result.resumed = true;
     note(fmt::format("resumed from {} at step {}", ckpt.string(), step));
@@ -150,18 +161,22 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   } else if (opt.distill_other_text) {
     fail("--distill-other-text needs --distill-from (the weights whose predictions it keeps)");
   }
-  fs::create_directories(opt.out);
-  train::StepLoop loop(opt.out / "metrics.jsonl", step, total, cfg.run.checkpoint_every, opt.stop_after);
+  if (main) fs::create_directories(opt.out);
+  train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
+                       opt.stop_after);
   auto save = [&]() {
-    train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", optim.get()}},
-                           {step, {{"config", cfg.name}}});
-    save_world(model, info, opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
+    auto& state = optim.gathered();  // every rank: a sharded state comes together on rank 0
+    if (main) {
+      train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", &state}}, {step, {{"config", cfg.name}}});
+      save_world(model, info, opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
+    }
+    optim.release();
   };
   // The best validation so far (OUT/best.safetensors + OUT/best.json, kept across resumes): on a small dataset the
   // last step has often memorised the training drives, and the best held-out score came earlier.
   const fs::path best_json = opt.out / "best.json";
   double best_bits = std::numeric_limits<double>::infinity();
-  if (!result.resumed) {  // a fresh run: an older run's best is not this one's
+  if (!result.resumed && main) {  // a fresh run: an older run's best is not this one's
     fs::remove(best_json);
     fs::remove(opt.out / "best.safetensors");
   }
@@ -191,44 +206,64 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     return v;
   };
 
+  const Precision precision = precision_for(cfg.run.precision, dev);
+  LossScaler scaler(precision);
   const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
   model->train();
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
-    auto batch = training_batch(ds, sampler, ds.has_captions() ? &vocab : nullptr, wc, cfg.run.seed, step).to(dev);
-    torch::manual_seed(train::step_seed(cfg.run.seed, step, 1));
+    // The whole step's batch on every rank; each takes its own micro-batches of it.
+    auto whole = training_batch(ds, sampler, ds.has_captions() ? &vocab : nullptr, wc, cfg.run.seed, step);
     const double lr = sched(step);
-    train::set_lr(*optim, lr);
-    auto logits = model->forward(batch);
-    auto loss = image_token_loss(logits, batch.tokens);
-    const double lv = loss.item<double>();  // logged: the cross-entropy alone, comparable with runs without a teacher
-    // The KL term to the teacher on the examples `keep` of batch b, added to the loss; returns its value.
-    auto distil = [&](const WorldBatch& b, const torch::Tensor& student, const torch::Tensor& keep) {
-      torch::Tensor tl;
+    optim.set_lr(lr);
+    optim.zero_grad();
+    double lv = 0, kl = teacher ? 0 : -1, kl_other = opt.distill_other_text ? 0 : -1;
+    for (int k = 0; k < accumulate; ++k) {
+      const int64_t b0 = opt.parallel.micro_offset(wc.batch_size, k);
+      auto batch = whole.examples(b0, b0 + micro).to(dev);
+      torch::manual_seed(train::step_seed(cfg.run.seed, step, 1 + opt.parallel.micro_stream(k)));
+      torch::Tensor loss;
       {
-        torch::NoGradGuard no_grad;
-        tl = teacher->forward(b);
+        Autocast autocast(precision, dev);
+        auto logits = model->forward(batch);
+        loss = image_token_loss(logits, batch.tokens);
+        lv += loss.item<double>() / accumulate;  // logged: the cross-entropy alone, comparable with runs without a teacher
+        // The KL term to the teacher on the examples `keep` of batch b, added to the loss; returns its value.
+        auto distil = [&](const WorldBatch& b, const torch::Tensor& student, const torch::Tensor& keep) {
+          torch::Tensor tl;
+          {
+            torch::NoGradGuard no_grad;
+            tl = teacher->forward(b);
+          }
+          auto d = image_token_kl(student.to(torch::kFloat), tl.to(torch::kFloat), keep);
+          const double v = d.item<double>();
+          if (!std::isfinite(v))
+            fail("world model training diverged at step {} (the distillation term is not finite)", step);
+          loss = loss + opt.distill_weight * d;
+          return v;
+        };
+        // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
+        if (teacher && !batch.use_action.all().item<bool>())
+          kl += distil(batch, logits, batch.use_action.logical_not()) / accumulate;
+        if (teacher && opt.distill_other_text) {
+          // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
+          auto other = batch.with_rolled_text(std::max<int64_t>(1, batch.batch() / 2));
+          kl_other += distil(other, model->forward(other), other.use_text) / accumulate;
+        }
       }
-      auto d = image_token_kl(student, tl, keep);
-      const double v = d.item<double>();
-      if (!std::isfinite(v))
-        fail("world model training diverged at step {} (the distillation term is not finite)", step);
-      loss = loss + opt.distill_weight * d;
-      return v;
-    };
-    double kl = teacher ? 0 : -1, kl_other = -1;
-    // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
-    if (teacher && !batch.use_action.all().item<bool>()) kl = distil(batch, logits, batch.use_action.logical_not());
-    if (teacher && opt.distill_other_text) {
-      // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
-      auto other = batch.with_rolled_text(std::max<int64_t>(1, batch.batch() / 2));
-      kl_other = distil(other, model->forward(other), other.use_text);
+      // Equal micro-batches: the mean of their mean losses is the whole batch's. fp16 scales the loss.
+      const double factor = scaler.scale() / accumulate;
+      (factor != 1 ? loss * factor : loss).backward();
     }
+    // Logged over the whole batch: the ranks' means averaged.
+    lv = dist.sum(lv) / dist.size();
+    if (kl >= 0) kl = dist.sum(kl) / dist.size();
+    if (kl_other >= 0) kl_other = dist.sum(kl_other) / dist.size();
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
-    optim->zero_grad();
-    loss.backward();
-    const double gn = train::clip_grad_norm(trained, wc.grad_clip);
-    optim->step();
+    const double gn = optim.step(wc.grad_clip, scaler.scale());
+    const bool skipped = !scaler.update(std::isfinite(gn));  // an overflow: no update this step
+    if (skipped && !scaler.active())
+      fail("world model training diverged at step {} (the gradient is not finite)", step);
     ++step;
     WorldStepLog log;
     log.step = step;
@@ -240,7 +275,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     log.distill_other = kl_other;
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    if (loop.validate_now(step, opt.val_every)) {
+    if (main && loop.validate_now(step, opt.val_every)) {
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
@@ -249,14 +284,18 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     nlohmann::json record = nlohmann::json({{"step", step}, {"lr", lr}, {"loss", lv}, {"grad_norm", gn},
                                {"tokens_per_s", log.tokens_per_s}, {"val", log.val}});
     if (teacher) record["distill"] = kl;
+    if (scaler.active()) {
+      record["loss_scale"] = scaler.scale();
+      record["skipped"] = skipped;
+    }
     if (kl_other >= 0) record["distill_other"] = kl_other;
-    if (on_step) on_step(log);
+    if (on_step && main) on_step(log);
     if (loop.end_step(step, record, save)) break;
   }
   result.final_step = step;
   result.best_bits = best_bits;
-  if (fs::exists(best_json)) result.best_step = read_json(best_json).value("step", -1);
-  if (step >= total) save_world(model, info, opt.out / "world.safetensors");
+  if (main && fs::exists(best_json)) result.best_step = read_json(best_json).value("step", -1);
+  if (main && step >= total) save_world(model, info, opt.out / "world.safetensors");
   return result;
 }
 

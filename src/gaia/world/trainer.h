@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/config.h"
+#include "gaia/train/distributed.h"
 #include "gaia/world/token_file.h"
 #include "gaia/core/fs.h"
 
@@ -36,6 +37,9 @@ struct WorldTrainOptions {
   // the batch) to the teacher's: the prompt then may contradict the frames, which is where text guidance works and
   // where no drive of the data shows what should happen (the weather does not change within a drive).
   bool distill_other_text = false;
+  // Data-parallel ranks, gradient accumulation, sharded optimiser state. Rank 0 alone writes OUT, validates and
+  // reports (on_step, on_note).
+  train::Parallel parallel;
 };
 
 struct WorldStepLog {

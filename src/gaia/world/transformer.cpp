@@ -110,7 +110,9 @@ torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* 
     TORCH_CHECK(cache->length < cache->capacity(), "KV cache overflow: ", cache->length, " + 1 > ", cache->capacity());
     if (K.is_contiguous() && V.is_contiguous() && K.scalar_type() == torch::kFloat) {
       auto x2 = x.view({B, d});  // 2-D products: LibTorch's linear pays for folding a 3-D input on every call
-      return proj->forward(attend_one_cached(qkv->forward(x2), K, V, cache->length, heads)).view({B, 1, d});
+      // float32 attention over the cache; the projections take autocast's precision (bf16: their outputs are bf16)
+      auto q_k_v = qkv->forward(x2).to(torch::kFloat);
+      return proj->forward(attend_one_cached(q_k_v, K, V, cache->length, heads)).view({B, 1, d});
     }
   }
   auto qkv_ = qkv->forward(x).view({B, L, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, B, H, L, hd]

@@ -1,0 +1,72 @@
+#pragma once
+// Data-parallel training on PyTorch's own distributed engine, c10d (§4: the paper trains on 64 GPUs): one process
+// per rank. `--nproc N` starts N ranks on this machine; torchrun and SLURM start them with the usual variables
+// (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT), every rank running the same command. Gloo carries CPU
+// tensors; NCCL carries CUDA tensors where LibTorch was built with it (else they travel through the CPU over Gloo).
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+namespace gaia::train {
+
+// The rank's place in the job, from the environment. WORLD_SIZE unset (or 1): a job of one, with no process group.
+struct RankEnv {
+  int rank = 0, world_size = 1, local_rank = 0;
+  std::string master_addr = "127.0.0.1";
+  int master_port = 29500;
+  static RankEnv from_environment();  // a malformed or inconsistent variable fails naming it
+};
+
+class Distributed;
+
+// How a trainer runs data-parallel: every rank builds the step's whole batch (a function of seed and step) and
+// takes its own `accumulate` micro-batches of it, so the job trains on the same batches as one process would,
+// whatever the world size, and resumes exactly on another.
+struct Parallel {
+  Distributed* dist = nullptr;  // this rank's job; nullptr = one process
+  int accumulate = 1;           // micro-batches per rank and step
+  bool shard_optimizer = false; // ZeRO-1 (train/parallel_adamw.h)
+  // Examples per micro-batch for a batch of `batch` (named `key` in an error when it does not divide evenly).
+  int64_t micro_batch(int64_t batch, const std::string& key) const;
+  // The first example of this rank's micro-batch k.
+  int64_t micro_offset(int64_t batch, int k) const;
+  // The stream of per-step seeds for micro-batch k (0 for one process without accumulation).
+  uint64_t micro_stream(int k) const;
+};
+
+class Distributed {
+ public:
+  // A job of one: every collective below is a no-op.
+  Distributed() = default;
+  // Joins the job (blocks until every rank has joined; fails after `timeout`). Rank 0 serves the rendezvous store
+  // at MASTER_ADDR:MASTER_PORT. A collective that waits longer than `timeout` (a rank died or hangs) fails with
+  // one line instead of hanging.
+  Distributed(const RankEnv& env, const torch::Device& device, std::chrono::milliseconds timeout);
+
+  int rank() const { return env_.rank; }
+  int size() const { return env_.world_size; }
+  bool is_main() const { return env_.rank == 0; }  // writes checkpoints, metrics and the progress bar
+  // The device this rank trains on: `requested`, with CUDA without an index taken as cuda:LOCAL_RANK.
+  static torch::Device rank_device(const torch::Device& requested, const RankEnv& env);
+
+  void barrier();
+  // Gradients of `params` summed over the ranks and divided by the world size: flattened into buckets of about
+  // `bucket_mb`, every bucket's all-reduce in flight at once. Parameters without a gradient count as zero.
+  void average_gradients(const std::vector<torch::Tensor>& params, double bucket_mb = 25);
+  // Rank `root`'s values of `tensors` copied into every rank's (one message).
+  void broadcast(const std::vector<torch::Tensor>& tensors, int root);
+  double sum(double v);  // over the ranks
+  void average(torch::Tensor& t);  // in place: the mean over the ranks of a float tensor
+  void sum(torch::Tensor& t);      // in place: the sum over the ranks of a float tensor
+
+ private:
+  struct Impl;
+  std::shared_ptr<Impl> impl_;
+  RankEnv env_;
+  void all_reduce(torch::Tensor& flat, const std::string& what);
+};
+
+}  // namespace gaia::train

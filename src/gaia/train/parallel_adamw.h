@@ -1,0 +1,56 @@
+#pragma once
+// AdamW for data-parallel training: after each step's backward passes the gradients are averaged over the ranks and
+// clipped by their global norm; then either every rank updates every parameter (replicated state), or, sharded in
+// the ZeRO-1 manner (Rajbhandari et al. 2020, as DeepSpeed ZeRO in the paper's §4), each rank keeps AdamW's two
+// moments for its own share of the parameters only, updates that share and sends it to the others. Sharding
+// divides the optimiser state (8 bytes per parameter in float32) by the world size.
+//
+// A checkpoint holds the state as one AdamW over every parameter, whatever the world size, so a run resumes on
+// another number of ranks.
+#include <memory>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "gaia/train/distributed.h"
+
+namespace gaia::train {
+
+struct AdamWSettings {
+  double lr = 1e-4, weight_decay = 0.01, beta1 = 0.9, beta2 = 0.999;
+};
+
+class ParallelAdamW {
+ public:
+  // `params`: the trained parameters, in the same order on every rank. `dist` outlives this object.
+  ParallelAdamW(const std::vector<torch::Tensor>& params, const AdamWSettings& s, Distributed& dist, bool shard);
+
+  void set_lr(double lr);
+  void zero_grad();
+  // Averages the gradients over the ranks, divides them by `loss_scale` (fp16's, torch/precision.h), clips their
+  // global norm to `max_norm` (0: no clipping; < 0: neither clipped nor measured, 0 returned), updates the
+  // parameters. Returns the norm before clipping; not finite: an overflow, and nothing is updated (every rank sees
+  // the same averaged gradients, so every rank skips).
+  double step(double max_norm, double loss_scale = 1);
+
+  // The state as one AdamW over every parameter (what save_checkpoint writes). Collective when sharded: every rank
+  // calls it, rank 0 receives the whole state (in CPU memory); call release() after saving.
+  torch::optim::Optimizer& gathered();
+  void release();
+  // The optimiser to load a checkpoint into; then loaded() hands each rank its share.
+  torch::optim::Optimizer& to_load() { return *full_; }
+  void loaded();
+
+  bool sharded() const { return static_cast<bool>(own_); }
+  // Bytes of AdamW moments this rank holds (after the first step): the measure of sharding.
+  int64_t state_bytes() const;
+
+ private:
+  std::vector<torch::Tensor> params_;
+  std::vector<int> owner_;                      // the rank that updates each parameter (sharded)
+  std::unique_ptr<torch::optim::AdamW> full_;  // every parameter: stepped when replicated; the checkpoint's view
+  std::unique_ptr<torch::optim::AdamW> own_;   // this rank's share, when sharded
+  Distributed& dist_;
+};
+
+}  // namespace gaia::train

@@ -1,0 +1,194 @@
+// Data-parallel training on c10d (train/distributed.h, train/parallel_adamw.h): two Gloo ranks on this machine train
+// the same weights as one process with the same global batch, with and without sharded optimiser state and with
+// gradient accumulation; a checkpoint of two ranks resumes on one; a killed rank ends the job with one line and
+// leaves a checkpoint that resumes.
+#include <cmath>
+
+#include "gaia/core/npy.h"
+#include "gaia/core/safetensors.h"
+#include "gaia/train/distributed.h"
+#include "gaia/world/batch.h"
+#include "test_util.h"
+
+using namespace gaia;
+using test::q;
+
+namespace {
+
+// Random tokens of a 4x8 grid, K = 64, as another tokenizer's file: enough for windows of the tiny world model.
+fs::path token_file(const fs::path& dir) {
+  const fs::path f = dir / "tokens.npy";
+  if (fs::exists(f)) return f;
+  torch::manual_seed(3);
+  auto t = torch::randint(0, 64, {160, 4, 8}, torch::kLong).contiguous();
+  std::vector<int64_t> v(t.data_ptr<int64_t>(), t.data_ptr<int64_t>() + t.numel());
+  npy_write(f, npy_make(DType::I64, {160, 4, 8}, v));
+  return f;
+}
+
+std::string train_args(const fs::path& tokens, const fs::path& out) {
+  return "world train " + q(tokens) + " --grid 4x8 --codebook-size 64 --config " +
+         q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1 --val-every 0 --out " + q(out);
+}
+
+// The largest difference between two weight files' tensors (every name of `a` must be in `b`).
+double max_difference(const fs::path& a, const fs::path& b) {
+  SafetensorsFile fa(a), fb(b);
+  double d = 0;
+  for (const auto& name : fa.names()) {
+    auto x = fa.to_float(name), y = fb.to_float(name);
+    EXPECT_EQ(x.size(), y.size()) << name;
+    for (size_t i = 0; i < std::min(x.size(), y.size()); ++i) d = std::max(d, double(std::abs(x[i] - y[i])));
+  }
+  return d;
+}
+
+}  // namespace
+
+TEST(Distributed, MicroBatchesSplitTheStepsBatchAmongRanksAndAccumulation) {
+  train::Parallel one;
+  EXPECT_EQ(one.micro_batch(8, "world.batch_size"), 8);
+  one.accumulate = 4;
+  EXPECT_EQ(one.micro_batch(8, "world.batch_size"), 2);
+  EXPECT_EQ(one.micro_offset(8, 3), 6);
+  EXPECT_EQ(one.micro_stream(3), 3u);
+  one.accumulate = 3;
+  EXPECT_NE(test::error_of([&] { one.micro_batch(8, "world.batch_size"); }).find("world.batch_size = 8"),
+            std::string::npos);
+
+  world::WorldBatch b{torch::arange(6).view({6, 1, 1}), torch::zeros({6, 1, 2}), {}, {},
+                      torch::tensor({true, false, true, false, true, false}), {}};
+  auto part = b.examples(2, 4);
+  EXPECT_EQ(part.batch(), 2);
+  EXPECT_EQ(part.tokens.flatten()[0].item<int64_t>(), 2);
+  EXPECT_TRUE(part.use_action[0].item<bool>());
+  EXPECT_FALSE(part.text_ids.defined());
+  EXPECT_FALSE(test::error_of([&] { b.examples(4, 7); }).empty());
+}
+
+TEST(Distributed, RankEnvironmentIsReadAndCheckedByName) {
+  ::unsetenv("WORLD_SIZE");
+  EXPECT_EQ(train::RankEnv::from_environment().world_size, 1);
+  ::setenv("WORLD_SIZE", "2", 1);
+  ::setenv("RANK", "5", 1);
+  auto msg = test::error_of([] { train::RankEnv::from_environment(); });
+  EXPECT_NE(msg.find("RANK=5"), std::string::npos) << msg;
+  ::setenv("RANK", "1", 1);
+  ::setenv("MASTER_PORT", "http", 1);
+  msg = test::error_of([] { train::RankEnv::from_environment(); });
+  EXPECT_NE(msg.find("MASTER_PORT"), std::string::npos) << msg;
+  ::setenv("MASTER_PORT", "29611", 1);
+  auto e = train::RankEnv::from_environment();
+  EXPECT_EQ(e.rank, 1);
+  EXPECT_EQ(e.master_port, 29611);
+  EXPECT_EQ(train::Distributed::rank_device(torch::Device("cuda"), e).str(), "cuda:0");
+  for (const char* v : {"WORLD_SIZE", "RANK", "MASTER_PORT"}) ::unsetenv(v);
+}
+
+TEST(DistributedCli, TwoRanksTrainTheWeightsOfOneProcess) {
+  test::TempDir dir;
+  const auto tokens = token_file(dir.path);
+  // The tiny world batch of 4: one process, two ranks of 2, two ranks with sharded AdamW state, one process
+  // accumulating two micro-batches of 2.
+  const std::vector<std::pair<std::string, std::string>> runs = {
+      {"one", ""}, {"two", " --nproc 2"}, {"zero", " --nproc 2 --shard-optimizer"}, {"accumulate", " --accumulate 2"}};
+  for (const auto& [name, flags] : runs) {
+    auto r = test::run_gaia(train_args(tokens, dir / name) + " --steps 6" + flags);
+    ASSERT_EQ(r.status, 0) << name << ": " << r.output;
+    // Rank 0 alone reports.
+    const auto first = r.output.find("world: step 6 (done)");
+    EXPECT_NE(first, std::string::npos) << name << ": " << r.output;
+    EXPECT_EQ(r.output.find("world: step 6 (done)", first + 1), std::string::npos) << name << ": " << r.output;
+  }
+  for (const auto& run : {"two", "zero", "accumulate"}) {
+    EXPECT_LT(max_difference(dir / "one" / "world.safetensors", dir / run / "world.safetensors"), 2e-5) << run;
+    auto a = test::jsonl_numbers(dir / "one" / "metrics.jsonl", "loss");
+    auto b = test::jsonl_numbers(dir / run / "metrics.jsonl", "loss");
+    ASSERT_EQ(a.size(), 6u);
+    ASSERT_EQ(b.size(), 6u) << run;
+    for (size_t i = 0; i < a.size(); ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << run << " step " << i + 1;
+  }
+  // One step moves the weights far more than that tolerance: the runs agree on training, not on doing nothing.
+  auto r5 = test::run_gaia(train_args(tokens, dir / "five") + " --steps 6 --stop-after 5");
+  ASSERT_EQ(r5.status, 0) << r5.output;
+  EXPECT_GT(max_difference(dir / "one" / "world.safetensors", dir / "five" / "latest.safetensors"), 1e-4);
+  auto r = test::run_gaia(train_args(tokens, dir / "three") + " --steps 2 --nproc 3");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("world.batch_size = 4 does not split into 3 rank(s)"), std::string::npos) << r.output;
+}
+
+TEST(DistributedCli, ShardedCheckpointOfTwoRanksResumesOnOneExactly) {
+  test::TempDir dir;
+  const auto tokens = token_file(dir.path);
+  auto r = test::run_gaia(train_args(tokens, dir / "whole") + " --steps 6");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(train_args(tokens, dir / "moved") + " --steps 6 --stop-after 3 --nproc 2 --shard-optimizer");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(train_args(tokens, dir / "moved") + " --steps 6");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("resumed from"), std::string::npos) << r.output;
+  EXPECT_LT(max_difference(dir / "whole" / "world.safetensors", dir / "moved" / "world.safetensors"), 2e-5);
+  EXPECT_EQ(test::jsonl_numbers(dir / "moved" / "metrics.jsonl", "loss").size(), 6u);
+}
+
+TEST(DistributedCli, AKilledRankEndsTheJobWithOneLineAndItResumes) {
+  test::TempDir dir;
+  const auto tokens = token_file(dir.path);
+  const fs::path out = dir / "run";
+  const std::string cmd = test::gaia_command(train_args(tokens, out) +
+                                             " --steps 100000 --nproc 2 --dist-timeout 20 --set run.checkpoint_every=5");
+  // Rank 1 (the child with RANK=1 in its environment) is killed once the first checkpoint is there.
+  const std::string script =
+      cmd + " > " + q(dir / "log") + " 2>&1 & P=$!\n"
+      "for i in $(seq 1200); do [ -f " + q(out / "checkpoint" / "state.json") + " ] && break; sleep 0.05; done\n"
+      "for c in $(pgrep -P $P); do tr '\\0' '\\n' < /proc/$c/environ | grep -qx RANK=1 && kill -9 $c; done\n"
+      "S=$(date +%s); wait $P; echo \"status=$? seconds=$(( $(date +%s) - S ))\"\n";
+  auto r = test::run_shell("bash -c " + q(script));
+  const std::string log = read_file(dir / "log");
+  EXPECT_NE(r.output.find("status=1"), std::string::npos) << r.output << log;
+  EXPECT_NE(log.find("--nproc 2: rank 1 was killed by signal 9"), std::string::npos) << log;
+  const auto secs = std::stoi(r.output.substr(r.output.find("seconds=") + 8));
+  EXPECT_LT(secs, 20) << log;  // within the timeout: the others are stopped, not left waiting
+  // The last checkpoint is intact and the job resumes from it.
+  r = test::run_gaia(train_args(tokens, out) + " --steps 100000 --nproc 2 --stop-after 2");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("resumed from"), std::string::npos) << r.output;
+}
+
+#ifndef GAIA_NO_VIDEO
+TEST(DistributedCli, TokenizerAndDecoderTrainOnTwoRanks) {
+  test::TempDir dir;
+  test::synth_dataset(dir / "ds", 3, 2.0);
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  const std::string tok = "tokenizer train " + q(dir / "ds") + tiny + " --val-every 0 --steps 3";
+  auto r = test::run_gaia(tok + " --out " + q(dir / "tok1"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia(tok + " --nproc 2 --shard-optimizer --out " + q(dir / "tok2"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  // The tokenizer's batch of 4 as two ranks of 2: the same loss at every step, and the same weights to within what
+  // AdamW makes of float noise (the biases before a group norm have no gradient but rounding, which AdamW turns
+  // into steps of up to the learning rate).
+  auto losses = [&](const fs::path& run) {
+    std::vector<double> out;
+    std::istringstream in(read_file(run / "metrics.jsonl"));
+    for (std::string line; std::getline(in, line);)
+      out.push_back(nlohmann::json::parse(line).at("losses").at("loss").get<double>());
+    return out;
+  };
+  const auto l1 = losses(dir / "tok1"), l2 = losses(dir / "tok2");
+  ASSERT_EQ(l1.size(), 3u);
+  ASSERT_EQ(l2.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(l1[i], l2[i], 1e-5) << "step " << i + 1;
+  EXPECT_LT(max_difference(dir / "tok1" / "tokenizer.safetensors", dir / "tok2" / "tokenizer.safetensors"), 1e-3);
+  // The decoder's ranks draw their own noise: the run and its resume on one process are what is checked.
+  const std::string dec = "decoder train " + q(dir / "ds") + " --tokenizer " + q(dir / "tok1" / "tokenizer.safetensors") +
+                          tiny + " --val-every 0 --steps 3 --out " + q(dir / "dec");
+  r = test::run_gaia(dec + " --stop-after 2 --nproc 2");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(test::jsonl_numbers(dir / "dec" / "metrics.jsonl", "loss").size(), 2u);
+  r = test::run_gaia(dec);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("resumed from"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(dir / "dec" / "decoder.safetensors"));
+}
+#endif

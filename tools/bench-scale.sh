@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# docs/benchmarks.md, "Mixed precision and data-parallel ranks on the CPU": world-model training steps and a rollout
+# at the default size, fp32 against bf16, and one process against --nproc 2, back to back on the same tokens.
+#
+#   tools/bench-scale.sh OUT_DIR [GAIA_BINARY]      (STEPS=30 training steps per run)
+set -euo pipefail
+OUT=${1:?usage: bench-scale.sh OUT_DIR [GAIA]}
+GAIA=$(realpath "${2:-build/gaia}")
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+STEPS=${STEPS:-30}
+mkdir -p "$OUT"
+cd "$OUT"
+if [ ! -f tokens/dataset.json ]; then
+  "$GAIA" synth --episodes 8 --seconds 20 --out synth > /dev/null
+  "$GAIA" tokenize synth --tokenizer "$ROOT/models/tokenizer.safetensors" --out tokens > /dev/null
+fi
+# Median tokens/s of a run's steps after the first two (warm-up).
+median_tps() {
+  python3 -c "import json,statistics,sys; r=[json.loads(l)['tokens_per_s'] for l in open(sys.argv[1])][2:]; print(round(statistics.median(r)))" "$1"
+}
+train() {  # NAME FLAGS...
+  local name=$1; shift
+  rm -rf "run-$name"
+  "$GAIA" world train tokens --steps "$STEPS" --val-every 0 --out "run-$name" "$@" > "run-$name.log" 2>&1
+  echo "$name $(median_tps "run-$name/metrics.jsonl")"
+}
+echo "world train, tokens/s (median of steps 3..$STEPS)"
+train fp32 --precision fp32
+train bf16 --precision bf16
+train nproc1 --threads 2
+train nproc2 --nproc 2
+echo "generate, 16 frames x 4 futures from an 8-frame prompt"
+for p in fp32 bf16; do
+  /usr/bin/time -f "$p %e s" "$GAIA" generate tokens --world "$ROOT/models/world.safetensors" --episode 0 \
+    --prompt-frames 8 --frames 16 --futures 4 --precision "$p" --out "gen-$p" 2>&1 | grep -E "frames/s|^$p "
+done
