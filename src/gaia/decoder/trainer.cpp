@@ -111,8 +111,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   const auto& dc = cfg.decoder;
   const torch::Device dev = parse_device(cfg.run.device);
   DecoderTrainResult result;
-  train::Distributed one;
-  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  train::Distributed& dist = opt.parallel.job();
   const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
     if (on_note && main) on_note(s);
@@ -122,9 +121,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   // Weights, gradients, AdamW's two moments and the EMA copy in float32, before any of it is allocated.
   sizing::check_memory(20.0 * double(sizing::decoder_params(cfg).total), "training this video decoder (decoder.*)");
   // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
-  std::unique_ptr<train::RunDir> run_dir;
-  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
-  dist.barrier();
+  const auto run_dir = train::claim_run_dir(opt.out, dist, note);
   auto tok = tokenizer::load_tokenizer(opt.tokenizer, dev);
   for (auto& p : tok->parameters()) p.set_requires_grad(false);
   const int64_t K = tok->cfg.codebook_size, D = tok->cfg.downsample;

@@ -49,8 +49,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   const auto& tc = cfg.tokenizer;
   const torch::Device dev = parse_device(cfg.run.device);
   TrainResult result;
-  train::Distributed one;
-  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  train::Distributed& dist = opt.parallel.job();
   const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
     result.notes.push_back(s);
@@ -62,9 +61,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   sizing::check_memory(16.0 * double(sizing::tokenizer_params(cfg).total + sizing::discriminator_params(cfg)),
                      "training this tokenizer (tokenizer.*)");
   // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
-  std::unique_ptr<train::RunDir> run_dir;
-  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
-  dist.barrier();
+  const auto run_dir = train::claim_run_dir(opt.out, dist, note);
 
   data::Dataset ds(opt.dataset);
   data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);

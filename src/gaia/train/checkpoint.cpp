@@ -129,4 +129,12 @@ std::string init_from(torch::nn::Module& dst, const torch::nn::Module& src, cons
                      from.string(), dropped.size(), dropped.front());
 }
 
+std::unique_ptr<RunDir> claim_run_dir(const fs::path& out, Distributed& dist,
+                                      const std::function<void(const std::string&)>& note) {
+  std::unique_ptr<RunDir> run_dir;
+  if (dist.is_main()) run_dir = std::make_unique<RunDir>(out, note);
+  dist.barrier();
+  return run_dir;
+}
+
 }  // namespace gaia::train

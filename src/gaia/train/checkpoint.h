@@ -9,6 +9,7 @@
 #include <torch/torch.h>
 
 #include "gaia/core/fs.h"
+#include "gaia/train/distributed.h"
 
 namespace gaia::train {
 
@@ -41,6 +42,11 @@ class RunDir {
   fs::path out_;
   DirLock lock_;
 };
+
+// A data-parallel run's directory: rank 0 claims it (RunDir) before any rank reads it, the others wait; nullptr on
+// the other ranks.
+std::unique_ptr<RunDir> claim_run_dir(const fs::path& out, Distributed& dist,
+                                      const std::function<void(const std::string&)>& note);
 
 // Loads what save_checkpoint wrote into the same modules / optimisers; returns the state.
 CheckpointState load_checkpoint(const fs::path& dir, const std::vector<std::pair<std::string, torch::nn::Module*>>& modules,

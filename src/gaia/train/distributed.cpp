@@ -55,6 +55,11 @@ int64_t Parallel::micro_offset(int64_t batch, int k) const {
 
 uint64_t Parallel::micro_stream(int k) const { return uint64_t((dist ? dist->rank() : 0) * accumulate + k); }
 
+Distributed& Parallel::job() const {
+  static Distributed one;  // no process group: stateless, shared
+  return dist ? *dist : one;
+}
+
 RankEnv RankEnv::from_environment() {
   RankEnv e;
   e.world_size = env_int("WORLD_SIZE", 1, 1, 1 << 20);
@@ -201,14 +206,15 @@ void Distributed::average_gradients(const std::vector<torch::Tensor>& params, do
   } catch (const std::exception& e) {
     lost_contact(env_.rank, "averaging gradients", e.what());
   }
-  auto used = has_grad.to(torch::kCPU);
+  const auto used_t = has_grad.to(torch::kCPU);
+  const auto used = used_t.accessor<float, 1>();
   const double inv = 1.0 / double(env_.world_size);
   for (auto& bucket : buckets) {
     if (!bucket.flat.defined()) continue;
     int64_t off = 0;
     for (size_t i : bucket.params) {
       auto p = params[i];
-      if (used[int64_t(i)].item<float>() > 0) {
+      if (used[int64_t(i)] > 0) {
         auto g = bucket.flat.narrow(0, off, p.numel()).view(p.sizes()).mul(inv).to(p.device(), p.scalar_type());
         if (p.grad().defined()) p.mutable_grad().copy_(g);
         else p.mutable_grad() = g.clone();
@@ -247,7 +253,6 @@ void Distributed::broadcast(const std::vector<torch::Tensor>& tensors, int root)
 double Distributed::sum(double x) {
   if (!impl_) return x;
   auto t = torch::tensor({x}, torch::TensorOptions().dtype(torch::kDouble)).to(impl_->comm_device);
-  if (impl_->comm_device.is_cuda()) t = t.to(torch::kFloat);  // NCCL reduces doubles too, but keep one dtype path
   all_reduce(t, "a sum");
   return t.to(torch::kCPU).to(torch::kDouble).item<double>();
 }

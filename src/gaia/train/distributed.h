@@ -35,6 +35,7 @@ struct Parallel {
   int64_t micro_offset(int64_t batch, int k) const;
   // The stream of per-step seeds for micro-batch k (0 for one process without accumulation).
   uint64_t micro_stream(int k) const;
+  Distributed& job() const;  // `dist`, or a job of one
 };
 
 class Distributed {

@@ -151,13 +151,4 @@ void ParallelAdamW::loaded() {
   all.clear();
 }
 
-int64_t ParallelAdamW::state_bytes() const {
-  int64_t b = 0;
-  for (const auto& [key, st] : (own_ ? own_ : full_)->state()) {
-    const auto& s = static_cast<const torch::optim::AdamWParamState&>(*st);
-    b += s.exp_avg().nbytes() + s.exp_avg_sq().nbytes();
-  }
-  return b;
-}
-
 }  // namespace gaia::train

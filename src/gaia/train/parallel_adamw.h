@@ -41,10 +41,6 @@ class ParallelAdamW {
   torch::optim::Optimizer& to_load() { return *full_; }
   void loaded();
 
-  bool sharded() const { return static_cast<bool>(own_); }
-  // Bytes of AdamW moments this rank holds (after the first step): the measure of sharding.
-  int64_t state_bytes() const;
-
  private:
   std::vector<torch::Tensor> params_;
   std::vector<int> owner_;                      // the rank that updates each parameter (sharded)

@@ -48,8 +48,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const auto& wc = cfg.world;
   const torch::Device dev = parse_device(cfg.run.device);
   WorldTrainResult result;
-  train::Distributed one;
-  train::Distributed& dist = opt.parallel.dist ? *opt.parallel.dist : one;
+  train::Distributed& dist = opt.parallel.job();
   const bool main = dist.is_main();
   auto note = [&](const std::string& s) {
     result.notes.push_back(s);
@@ -60,9 +59,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   // Weights, gradients and AdamW's two moments in float32, before any of it is allocated.
   sizing::check_memory(16.0 * double(sizing::world_params(cfg).total), "training this world model (world.*)");
   // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
-  std::unique_ptr<train::RunDir> run_dir;
-  if (main) run_dir = std::make_unique<train::RunDir>(opt.out, note);
-  dist.barrier();
+  const auto run_dir = train::claim_run_dir(opt.out, dist, note);
 
   // gaia tokenize's datasets state K in dataset.json; other tokenizers' files take it from the format or the
   // config, never from their largest id.
