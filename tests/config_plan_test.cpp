@@ -1,11 +1,14 @@
 // Config registry (YAML, --set, unknown keys) and `gaia plan` against the paper's figures.
 #include "gaia/config.h"
+#include "gaia/core/npy.h"
 #include "gaia/core/error.h"
 #include "gaia/sizing/sizing.h"
 #include "test_util.h"
 
 #include <algorithm>
 #include <cmath>
+#include <random>
+#include <regex>
 
 using namespace gaia;
 
@@ -149,6 +152,75 @@ TEST(Plan, WorldModelCountFollowsTheGptFormula) {
   int64_t def = sizing::world_params(load("default.yaml")).total;
   EXPECT_GT(def, 1000000);
   EXPECT_LT(def, 20000000);
+}
+
+// The training-memory terms follow the run's settings: sharding divides AdamW's moments, fused attention drops the
+// s^2 probabilities (kept per layer, and three at once in the backward pass), checkpointing keeps one layer's activations, 16-bit autocast halves most of them.
+TEST(Plan, TrainingMemoryFollowsTheRunsSettings) {
+  Config c = load("default.yaml");
+  auto base = sizing::train_memory_settings(c, 1, 1, false, false);
+  EXPECT_EQ(base.micro_batch, c.world.batch_size);
+  EXPECT_EQ(base.activation_bytes, 4);
+  const auto m = sizing::world_train_memory(c, base);
+  const double N = double(sizing::world_params(c).total);
+  EXPECT_DOUBLE_EQ(m.weights, 4 * N);
+  EXPECT_DOUBLE_EQ(m.optimizer, 8 * N);
+  EXPECT_DOUBLE_EQ(m.buckets, 0);
+  auto two = sizing::train_memory_settings(c, 2, 1, true, false);
+  EXPECT_EQ(two.micro_batch, c.world.batch_size / 2);
+  const auto m2 = sizing::world_train_memory(c, two);
+  EXPECT_DOUBLE_EQ(m2.optimizer, 4 * N);
+  EXPECT_DOUBLE_EQ(m2.buckets, 4 * N);
+  EXPECT_NEAR(m2.activations, m.activations / 2, 1);
+  auto fused = base;
+  fused.fused_attention = true;
+  const double s = double(c.sequence_length());
+  EXPECT_NEAR(m.activations - sizing::world_train_memory(c, fused).activations,
+              c.world.n_heads * 4.0 * base.micro_batch * s * ((c.world.n_layers + 3) * s - c.world.n_layers), 1);
+  auto ckpt = base;
+  ckpt.checkpointing = true;
+  EXPECT_LT(sizing::world_train_memory(c, ckpt).activations, 0.6 * m.activations);
+  // 16-bit autocast halves what fused attention keeps; unfused, it keeps the probabilities twice (float32 for the
+  // softmax, 16-bit for the product with the values).
+  const double fp32_fused = sizing::world_train_memory(c, fused).activations;
+  c.run.precision = "bf16";
+  auto half = sizing::train_memory_settings(c, 1, 1, false, true);
+  EXPECT_EQ(half.activation_bytes, 2);
+  EXPECT_LT(sizing::world_train_memory(c, half).activations, 0.6 * fp32_fused);
+  half.fused_attention = false;
+  EXPECT_GT(sizing::world_train_memory(c, half).activations, sizing::world_train_memory(c, fused).activations);
+
+  // One bf16 sequence of the paper's model with fused attention: about Korthikanti et al.'s 34 s d bytes a layer.
+  Config paper = load("paper.yaml");
+  const double per_layer = sizing::make_plan(paper).world_act_gb_per_seq * 1e9 / paper.world.n_layers;
+  EXPECT_NEAR(per_layer / (34.0 * double(paper.sequence_length()) * paper.world.d_model), 1, 0.15);
+}
+
+// `world train` measures its peak resident memory above the start of training and prints it beside gaia plan's
+// figure for the same run: on the default model (micro-batch 2) the two agree within the allocator's slack, and
+// the tiny model's peak stays within a few MB of a plan too small to measure apart from the process's fixed costs.
+TEST(PlanCli, TrainingMemoryMatchesWhatWorldTrainMeasures) {
+  test::TempDir dir;
+  auto measured = [&](const std::string& config, int64_t h, int64_t w, int64_t K, const std::string& sets) {
+    const fs::path f = dir / (config + ".npy");
+    std::mt19937 rng(5);
+    std::vector<int64_t> ids(size_t(120 * h * w));
+    for (auto& id : ids) id = int64_t(rng() % uint32_t(K));
+    npy_write(f, npy_make(DType::I64, {120, h, w}, ids));
+    auto r = test::run_gaia("world train " + test::q(f) + " --grid " + std::to_string(h) + "x" + std::to_string(w) +
+                            " --codebook-size " + std::to_string(K) + " --config " +
+                            test::q(test::source_dir() / "configs" / (config + ".yaml")) + sets +
+                            " --threads 1 --val-every 0 --steps 2 --out " + test::q(dir / config));
+    EXPECT_EQ(r.status, 0) << r.output;
+    std::smatch m;
+    EXPECT_TRUE(std::regex_search(r.output, m, std::regex("peak was (\\d+) MB .* at (\\d+) MB"))) << r.output;
+    return m.size() == 3 ? std::make_pair(std::stod(m[1]), std::stod(m[2])) : std::make_pair(0.0, 1.0);
+  };
+  const auto [peak, plan] = measured("default", 9, 16, 1024, " --set world.batch_size=2");
+  EXPECT_GT(peak / plan, 0.8);
+  EXPECT_LT(peak / plan, 1.5);
+  const auto [tiny_peak, tiny_plan] = measured("tiny", 4, 8, 64, "");
+  EXPECT_LT(std::abs(tiny_peak - tiny_plan), 32);
 }
 
 TEST(PlanCli, PrintsPaperFigures) {

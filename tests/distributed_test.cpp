@@ -3,10 +3,12 @@
 // gradient accumulation; a checkpoint of two ranks resumes on one; a killed rank ends the job with one line and
 // leaves a checkpoint that resumes.
 #include <cmath>
+#include <thread>
 
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/train/distributed.h"
+#include "gaia/train/grad_reducer.h"
 #include "gaia/world/batch.h"
 #include "test_util.h"
 
@@ -83,6 +85,85 @@ TEST(Distributed, RankEnvironmentIsReadAndCheckedByName) {
   EXPECT_EQ(e.master_port, 29611);
   EXPECT_EQ(train::Distributed::rank_device(torch::Device("cuda"), e).str(), "cuda:0");
   for (const char* v : {"WORLD_SIZE", "RANK", "MASTER_PORT"}) ::unsetenv(v);
+}
+
+// Two ranks as two threads of this process, each with its own process group: a three-layer net, two micro-batches
+// per rank, a parameter only rank 1 uses and one nobody uses, buckets of a few hundred values so that several start
+// while the last backward pass runs. Each rank ends with the mean of both ranks' gradients, which each thread also
+// works out alone.
+TEST(Distributed, GradientsAveragedDuringTheBackwardPassEqualThoseAveragedAfterIt) {
+  auto make_params = [] {  // a generator of its own: the two ranks' threads draw at the same time
+    auto gen = at::detail::createCPUGenerator(7);
+    std::vector<torch::Tensor> p;
+    for (auto shape : std::vector<std::vector<int64_t>>{{8, 16}, {16, 16}, {16, 4}, {5}, {3}})
+      p.push_back(torch::randn(shape, gen));
+    for (auto& t : p) t.set_requires_grad(true);
+    return p;
+  };
+  // Rank r's loss on micro-batch k; p[3] only on rank 1, p[4] never.
+  auto loss_of = [](const std::vector<torch::Tensor>& p, int r, int k) {
+    auto x = torch::linspace(-1, 1, 8 * 6).view({6, 8}) * double(1 + 2 * r + k);
+    auto y = torch::tanh(torch::tanh(x.matmul(p[0])).matmul(p[1])).matmul(p[2]);
+    auto l = y.pow(2).mean();
+    return r == 1 ? l + p[3].pow(2).sum() : l;
+  };
+  struct Result {
+    double max_error = 1;
+    size_t buckets = 0, sent_during = 0;
+    bool never_has_grad = true, only1_has_grad = false;
+    std::string error;
+  };
+  auto run = [&](bool overlap) {
+    const int port = train::RankEnv::free_local_port();
+    std::vector<Result> results(2);
+    auto rank = [&](int r) {
+      auto& out = results[size_t(r)];
+      try {
+        train::RankEnv env;
+        env.rank = r;
+        env.world_size = 2;
+        env.master_port = port;
+        train::Distributed dist(env, torch::kCPU, std::chrono::seconds(60));
+        auto p = make_params();
+        train::GradientReducer reducer(p, dist, overlap, 0.001, 0.0005);
+        for (int step = 0; step < 2; ++step) {  // twice: the hooks re-arm
+          for (auto& t : p) t.mutable_grad() = torch::Tensor();
+          for (int k = 0; k < 2; ++k) reducer.backward(loss_of(p, r, k), k == 1);
+          reducer.finish();
+        }
+        auto ref = make_params();
+        for (int rr = 0; rr < 2; ++rr)
+          for (int k = 0; k < 2; ++k) loss_of(ref, rr, k).backward();
+        out.max_error = 0;
+        for (size_t i = 0; i < 4; ++i)
+          out.max_error = std::max(out.max_error, (p[i].grad() - ref[i].grad() / 2).abs().max().item<double>());
+        out.buckets = reducer.buckets();
+        out.sent_during = reducer.sent_during_backward();
+        out.never_has_grad = p[4].grad().defined();
+        out.only1_has_grad = p[3].grad().defined();
+      } catch (const std::exception& e) {
+        out.error = e.what();
+      }
+    };
+    std::thread t1(rank, 1);
+    rank(0);
+    t1.join();
+    return results;
+  };
+  const auto overlapped = run(true);
+  for (const auto& r : overlapped) {
+    ASSERT_TRUE(r.error.empty()) << r.error;
+    EXPECT_LT(r.max_error, 1e-6);
+    EXPECT_GE(r.buckets, 3u);
+    EXPECT_GE(r.sent_during, 1u);  // buckets left while backward ran
+    EXPECT_FALSE(r.never_has_grad);
+    EXPECT_TRUE(r.only1_has_grad);  // rank 0 did not use it, but averages rank 1's half
+  }
+  for (const auto& r : run(false)) {
+    ASSERT_TRUE(r.error.empty()) << r.error;
+    EXPECT_LT(r.max_error, 1e-6);
+    EXPECT_EQ(r.sent_during, 0u);
+  }
 }
 
 TEST(DistributedCli, TwoRanksTrainTheWeightsOfOneProcess) {

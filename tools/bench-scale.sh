@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # docs/benchmarks.md, "Mixed precision and data-parallel ranks on the CPU": world-model training steps and a rollout
-# at the default size, fp32 against bf16, and one process against --nproc 2, back to back on the same tokens.
+# at the default size, fp32 against bf16, one process against --nproc 2, gradients averaged during the backward pass
+# against after it, back to back on the same tokens; then "Training memory": gaia plan's peak against the measured.
 #
 #   tools/bench-scale.sh OUT_DIR [GAIA_BINARY]      (STEPS=30 training steps per run)
 set -euo pipefail
@@ -29,8 +30,19 @@ train fp32 --precision fp32
 train bf16 --precision bf16
 train nproc1 --threads 2
 train nproc2 --nproc 2
+train nproc2-no-overlap --nproc 2 --no-overlap
 echo "generate, 16 frames x 4 futures from an 8-frame prompt"
 for p in fp32 bf16; do
   /usr/bin/time -f "$p %e s" "$GAIA" generate tokens --world "$ROOT/models/world.safetensors" --episode 0 \
     --prompt-frames 8 --frames 16 --futures 4 --precision "$p" --out "gen-$p" 2>&1 | grep -E "frames/s|^$p "
 done
+echo "world train memory: measured peak above the start of training, and gaia plan's figure"
+for b in 2 4 8; do
+  rm -rf mem
+  echo "default, batch $b: $("$GAIA" world train tokens --steps 3 --val-every 0 --set world.batch_size=$b --threads 2 \
+    --out mem 2>&1 | grep -o 'the peak was.*beyond')"
+done
+python3 -c "import numpy as n; n.save('tiny.npy', n.random.RandomState(0).randint(0, 64, (160, 4, 8)))"
+rm -rf mem
+echo "tiny, batch 4: $("$GAIA" world train tiny.npy --grid 4x8 --codebook-size 64 --config "$ROOT/configs/tiny.yaml" \
+  --steps 3 --val-every 0 --threads 2 --out mem 2>&1 | grep -o 'the peak was.*beyond')"

@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
+#include <torch/version.h>
 
 #include "common.h"
 #include "gaia/sizing/sizing.h"
@@ -15,6 +16,13 @@ void register_plan(CLI::App& app) {
   cmd->add_option("CONFIG", *positional, "config YAML (same as --config)");
   add_shared_flags(cmd, flags.get(), "unused");
   auto json = std::make_shared<bool>(false), keys = std::make_shared<bool>(false);
+  auto ranks = std::make_shared<int>(1), accumulate = std::make_shared<int>(1);
+  auto shard = std::make_shared<bool>(false);
+  cmd->add_option("--nproc", *ranks, "training memory: ranks the world model trains on (data-parallel)")
+      ->check(number_in({1, 1 << 20}));
+  cmd->add_option("--accumulate", *accumulate, "training memory: micro-batches per rank and step")
+      ->check(number_in({1, 1 << 16}));
+  cmd->add_flag("--shard-optimizer", *shard, "training memory: AdamW's state sharded over the ranks (ZeRO-1)");
   cmd->add_flag("--json", *json, "print the plan as JSON");
   cmd->add_flag("--keys", *keys, "list every config key with its type, role (architecture, training, sampling, ...), value in this config and allowed range");
   cmd->callback([=] {
@@ -29,6 +37,9 @@ void register_plan(CLI::App& app) {
       return;
     }
     sizing::Plan p = sizing::make_plan(c);
+    // This build's attention: fused where LibTorch has scaled_dot_product_attention (torch/attention.cpp).
+    const auto ms = sizing::train_memory_settings(c, *ranks, *accumulate, *shard, TORCH_VERSION_MAJOR >= 2);
+    const auto mem = sizing::world_train_memory(c, ms);
     if (*json) {
       nlohmann::json j = {{"config", c.name},
                           {"tokenizer_params", p.tokenizer.total},
@@ -40,10 +51,24 @@ void register_plan(CLI::App& app) {
                           {"sequence_length", p.sequence_length},
                           {"bit_compression", p.bit_compression},
                           {"world_flops_per_token", p.world_flops_per_token},
-                          {"world_flops_per_token_with_attn", p.world_flops_per_token_with_attn}};
+                          {"world_flops_per_token_with_attn", p.world_flops_per_token_with_attn},
+                          {"world_train_memory",
+                           {{"micro_batch", ms.micro_batch},
+                            {"ranks", ms.ranks},
+                            {"precision", c.run.precision},
+                            {"fused_attention", ms.fused_attention},
+                            {"weights", mem.weights},
+                            {"gradients", mem.grads},
+                            {"optimizer", mem.optimizer},
+                            {"allreduce_buffers", mem.buckets},
+                            {"activations", mem.activations},
+                            {"output_distribution", mem.logits},
+                            {"beyond_weights", mem.beyond_weights()},
+                            {"total", mem.total()}}}};
       std::printf("%s\n", j.dump(2).c_str());
     } else {
       std::fputs(sizing::format_plan(p, c).c_str(), stdout);
+      std::fputs(sizing::format_train_memory(mem, ms).c_str(), stdout);
     }
   });
 }

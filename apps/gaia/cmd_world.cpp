@@ -73,7 +73,7 @@ void register_world(CLI::App& app) {
       if (launch_local_ranks(*par)) return;
       auto dist = join_job(*par, c);
       world::WorldTrainOptions opt = *o;
-      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer};
+      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer, !par->no_overlap};
       opt.tokens = *tokens;
       opt.format = token_format(*format, c, false);
       opt.out = flags->out;

@@ -103,11 +103,12 @@ void apply_threads(const Config& c);
 // its exit status: train-all's stages and demo --from-scratch.
 int run_gaia_child(const std::vector<std::string>& args);
 
-// Data-parallel training (train/distributed.h): --nproc, --accumulate, --shard-optimizer, --dist-timeout.
+// Data-parallel training (train/distributed.h): --nproc, --accumulate, --shard-optimizer, --no-overlap, --dist-timeout.
 struct ParallelFlags {
   int nproc = 1;
   int accumulate = 1;
   bool shard_optimizer = false;
+  bool no_overlap = false;
   double timeout_s = 1800;  // as torch.distributed's default
 };
 void add_parallel_flags(CLI::App* cmd, ParallelFlags* f);

@@ -6,9 +6,6 @@
 #include <cstdlib>
 #include <thread>
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -20,22 +17,6 @@
 namespace gaia::app {
 
 namespace {
-
-// A TCP port free on this machine now, for the rendezvous of local ranks.
-int free_port() {
-  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (s < 0) fail("--nproc: cannot open a socket to find a free port");
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = 0;
-  socklen_t len = sizeof a;
-  const bool ok = ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-                  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &len) == 0;
-  ::close(s);
-  if (!ok) fail("--nproc: cannot find a free port on 127.0.0.1");
-  return ntohs(a.sin_port);
-}
 
 std::string describe(int status) {
   if (WIFSIGNALED(status)) return fmt::format("was killed by signal {}", WTERMSIG(status));
@@ -58,6 +39,9 @@ void add_parallel_flags(CLI::App* cmd, ParallelFlags* f) {
       ->check(number_in({1, 1 << 16}))->group(g);
   cmd->add_flag("--shard-optimizer", f->shard_optimizer,
                 "keep AdamW's state sharded over the ranks (ZeRO-1): 1/N of it on each")->group(g);
+  cmd->add_flag("--no-overlap", f->no_overlap,
+                "average the gradients after the backward pass instead of during it (the same numbers, later)")
+      ->group(g);
   cmd->add_option("--dist-timeout", f->timeout_s,
                   "seconds a rank waits for the others (joining, every collective) before failing")
       ->check(number_in({1, 86400}))->group(g);
@@ -78,7 +62,7 @@ bool launch_local_ranks(const ParallelFlags& f) {
   std::error_code ec;
   const std::string exe = fs::read_symlink("/proc/self/exe", ec).string();
   if (ec) fail("--nproc: cannot find the gaia binary ({})", ec.message());
-  const int port = free_port();
+  const int port = train::RankEnv::free_local_port();
   std::fflush(stdout);
   std::fflush(stderr);
   std::vector<pid_t> pids;

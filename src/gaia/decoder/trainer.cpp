@@ -152,8 +152,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
   model->to(dev);
   ema->to(dev);
   train::ema_copy(*ema, *model);
-  train::ParallelAdamW optim(model->parameters(), {dc.lr, dc.weight_decay, dc.beta1, dc.beta2}, dist,
-                             opt.parallel.shard_optimizer);
+  train::ParallelAdamW optim(model->parameters(), {dc.lr, dc.weight_decay, dc.beta1, dc.beta2}, opt.parallel);
   const int total = opt.steps > 0 ? opt.steps : dc.steps;
   train::WarmupCosine sched{dc.lr, dc.final_lr, dc.warmup_steps, total};
   NoiseSchedule noise{-15.0, 15.0, dc.schedule_shift};
@@ -252,7 +251,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
       }
       lv += loss.item<double>() / accumulate;
       const double factor = scaler.scale() / accumulate;  // fp16 scales the loss
-      (factor != 1 ? loss * factor : loss).backward();
+      optim.backward(factor != 1 ? loss * factor : loss, k, accumulate);
     }
     lv = dist.sum(lv) / dist.size();
     if (!std::isfinite(lv)) fail("video decoder training diverged at step {} (loss is not finite)", step);

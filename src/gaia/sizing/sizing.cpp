@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 
 #include <fmt/format.h>
@@ -164,9 +165,14 @@ Plan make_plan(const Config& c) {
   const double GB = 1e9;
   p.world_weights_gb = 4.0 * p.world.total / GB;
   p.world_train_state_gb = 16.0 * p.world.total / GB;
-  // Korthikanti et al. 2022: ~34 s d bytes per layer in 16-bit without the s^2 attention term (FlashAttention).
-  p.world_act_gb_per_seq = 34.0 * s * d * L / GB;
-  p.world_act_ckpt_gb_per_seq = (2.0 * s * d * L + 34.0 * s * d) / GB;
+  // One sequence in bf16 with fused attention (world_train_memory; close to Korthikanti et al. 2022's 34 s d bytes
+  // per layer).
+  TrainMemorySettings one;
+  one.activation_bytes = 2;
+  one.fused_attention = true;
+  p.world_act_gb_per_seq = world_train_memory(c, one).activations / GB;
+  one.checkpointing = true;
+  p.world_act_ckpt_gb_per_seq = world_train_memory(c, one).activations / GB;
   p.tokenizer_weights_gb = 4.0 * p.tokenizer.total / GB;
   p.decoder_weights_gb = 4.0 * p.decoder.total / GB;
   return p;
@@ -207,6 +213,77 @@ std::string format_plan(const Plan& p, const Config& c) {
   s += fmt::format("tokenizer bit compression  H W 3 8 / (n log2 K) = {:.1f}\n", p.bit_compression);
   return s;
 }
+
+TrainMemorySettings train_memory_settings(const Config& c, int ranks, int accumulate, bool shard_optimizer,
+                                          bool fused_attention) {
+  TrainMemorySettings m;
+  m.ranks = std::max(1, ranks);
+  m.micro_batch = std::max<int64_t>(1, c.world.batch_size / (int64_t(m.ranks) * std::max(1, accumulate)));
+  m.shard_optimizer = shard_optimizer && m.ranks > 1;
+  m.activation_bytes = c.run.precision == "fp32" ? 4 : 2;
+  m.fused_attention = fused_attention;
+  m.checkpointing = c.world.activation_checkpointing;
+  return m;
+}
+
+TrainMemory world_train_memory(const Config& c, const TrainMemorySettings& m) {
+  TrainMemory t;
+  const double N = double(world_params(c).total), f = 4, e = m.activation_bytes;
+  const double B = double(m.micro_batch), s = double(c.sequence_length()), d = c.world.d_model;
+  const double L = c.world.n_layers, H = c.world.n_heads, K = c.tokenizer.codebook_size;
+  t.weights = f * N;  // float32 master weights
+  t.grads = f * N;
+  t.optimizer = 2 * f * N / (m.shard_optimizer ? m.ranks : 1);  // AdamW's m and v
+  t.buckets = m.ranks > 1 ? f * N : 0;                          // the flat all-reduce buffers (train/grad_reducer.h)
+  // Saved for the backward pass per layer (world/transformer.cpp): the float32 residual stream at both norms, the
+  // two norms' outputs, q, k, v, the heads' output, the MLP's hidden layer before and after the GELU:
+  // s B d (2 f + 14 e); and the attention probabilities, H s^2 B in float32 (and again in e bytes under autocast),
+  // which fused attention replaces by one float per query and head.
+  const double per_layer_states = s * B * d * (2 * f + 14 * e);
+  const double scores = m.fused_attention ? H * s * B * f : H * s * s * B * (f + (e < f ? e : 0));
+  const double layer = per_layer_states + scores;
+  // Checkpointing keeps each layer's input and recomputes one layer at a time. Unfused attention's backward pass
+  // holds three more float32 tensors of the probabilities' size at once (their gradient, the scores' gradient and
+  // the softmax backward's product) while every earlier layer's activations are still kept.
+  const double transient = m.fused_attention ? 0 : 3 * H * s * s * B * f;
+  t.activations = (m.checkpointing ? L * s * B * d * f + layer : L * layer) + 3 * s * B * d * f + transient;
+  // The image tokens' distribution over K codes: the logits (e), their float32 log-softmax, and in the backward pass
+  // the gradients of both.
+  const double image_positions = double(c.world.context_steps) * c.image_tokens() * B;
+  t.logits = image_positions * K * (e + 3 * f);
+  return t;
+}
+
+std::string format_train_memory(const TrainMemory& t, const TrainMemorySettings& m) {
+  auto bytes = [](double v) {
+    if (v >= 1e9) return fmt::format("{:.2f} GB", v / 1e9);
+    if (v >= 1e6) return fmt::format("{:.0f} MB", v / 1e6);
+    return fmt::format("{:.0f} KB", v / 1e3);
+  };
+  std::string s = fmt::format(
+      "  training memory  per rank at its peak, micro-batch {} x {} rank(s), {}, {} attention{}{}:\n", m.micro_batch,
+      m.ranks, m.activation_bytes == 4 ? "fp32" : "16-bit autocast", m.fused_attention ? "fused" : "unfused",
+      m.shard_optimizer ? ", sharded AdamW" : "", m.checkpointing ? ", activation checkpointing" : "");
+  s += fmt::format("    weights {} + gradients {} + AdamW {}{} + activations {} + output distribution {} = {}\n",
+                   bytes(t.weights), bytes(t.grads), bytes(t.optimizer),
+                   t.buckets > 0 ? " + all-reduce buffers " + bytes(t.buckets) : "", bytes(t.activations),
+                   bytes(t.logits), bytes(t.total()));
+  return s;
+}
+
+namespace {
+// A field of /proc/self/status in kB, as bytes (0 where the system has none).
+double status_bytes(const std::string& field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind(field + ":", 0) == 0) return std::atof(line.c_str() + field.size() + 1) * 1024.0;
+  return 0;
+}
+}  // namespace
+
+double resident_bytes() { return status_bytes("VmRSS"); }
+double peak_resident_bytes() { return status_bytes("VmHWM"); }
 
 double rollout_memory_bytes(const Config& c, int64_t futures, int64_t steps, int passes, bool preview) {
   const double B = double(futures) * std::max(passes, 1);

@@ -37,6 +37,33 @@ struct Plan {
 
 Plan make_plan(const Config& c);
 
+// The memory one rank holds at its peak while training the world model, term by term (bytes), for a run's own
+// settings: `gaia plan --nproc --accumulate --shard-optimizer` prints it, and `world train` reports it beside the
+// peak it measures. The peak falls at the start of the backward pass, with every saved activation and the output
+// distribution's gradients alive, on top of last step's gradients and AdamW's moments.
+struct TrainMemorySettings {
+  int64_t micro_batch = 1;       // sequences per forward pass: world.batch_size / (ranks x accumulate)
+  int ranks = 1;
+  bool shard_optimizer = false;  // AdamW's moments divided over the ranks (ZeRO-1)
+  int activation_bytes = 4;      // 4: float32; 2: bf16 / fp16 autocast
+  bool fused_attention = false;  // scaled_dot_product_attention (LibTorch >= 2): no s^2 probabilities kept
+  bool checkpointing = false;    // world.activation_checkpointing
+};
+struct TrainMemory {
+  double weights = 0, grads = 0, optimizer = 0, buckets = 0, activations = 0, logits = 0;
+  double beyond_weights() const { return grads + optimizer + buckets + activations + logits; }
+  double total() const { return weights + beyond_weights(); }
+};
+// The settings of a run of `c` with `ranks` and `accumulate`, on this build (fused attention where LibTorch has it).
+TrainMemorySettings train_memory_settings(const Config& c, int ranks, int accumulate, bool shard_optimizer,
+                                          bool fused_attention);
+TrainMemory world_train_memory(const Config& c, const TrainMemorySettings& m);
+std::string format_train_memory(const TrainMemory& t, const TrainMemorySettings& m);  // one table for the CLI
+
+// This process's resident memory now, and the most it has held since it started (bytes; 0 where unknown).
+double resident_bytes();
+double peak_resident_bytes();
+
 // Memory a rollout of `futures` futures over `steps` steps holds at its peak: the KV cache of every layer over
 // the context (times `passes`: 2 or 3 with classifier-free guidance), the logits of a token, the output tokens and,
 // with `preview`, the decoded preview frames.

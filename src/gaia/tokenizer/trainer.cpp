@@ -109,9 +109,9 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     for (auto& p : model->quantizer->parameters()) p.set_requires_grad(false);
   }
   const train::AdamWSettings adamw{tc.lr, tc.weight_decay, tc.beta1, tc.beta2};
-  train::ParallelAdamW opt_g(opt.decoder_only ? model->decoder->parameters() : model->parameters(), adamw, dist,
-                             opt.parallel.shard_optimizer);
-  train::ParallelAdamW opt_d(disc->parameters(), adamw, dist, opt.parallel.shard_optimizer);
+  train::ParallelAdamW opt_g(opt.decoder_only ? model->decoder->parameters() : model->parameters(), adamw,
+                             opt.parallel);
+  train::ParallelAdamW opt_d(disc->parameters(), adamw, opt.parallel);
   const int total = opt.steps > 0 ? opt.steps : tc.steps;
   train::WarmupCosine sched{tc.lr, tc.final_lr, tc.warmup_steps, total};
 
@@ -292,7 +292,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       }
       sums["loss"] += loss.item<double>();
       const double factor = scaler.scale() / accumulate;  // fp16 scales the loss
-      (factor != 1 ? loss * factor : loss).backward();
+      opt_g.backward(factor != 1 ? loss * factor : loss, k, accumulate);
       // Code usage since the last restart; unused codes are re-seeded from recent encoder outputs.
       auto idx = o.q.indices.reshape({-1}).to(torch::kCPU);
       auto acc = idx.accessor<int64_t, 1>();
@@ -307,7 +307,8 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     if (gan) {
       opt_d.zero_grad();
       double d_loss = 0;
-      for (const auto& [frames, recon] : seen) {
+      for (size_t k = 0; k < seen.size(); ++k) {
+        const auto& [frames, recon] = seen[k];
         torch::Tensor ld;
         {
           Autocast autocast(precision, dev);
@@ -315,7 +316,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
         }
         d_loss += ld.item<double>() / accumulate;
         const double factor = scaler.scale() / accumulate;
-        (factor != 1 ? ld * factor : ld).backward();
+        opt_d.backward(factor != 1 ? ld * factor : ld, int(k), int(seen.size()));
       }
       opt_d.step(-1, scaler.scale());
       terms["gan_d"] = dist.sum(d_loss) / dist.size();

@@ -2,6 +2,11 @@
 
 #include <cstdlib>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 // LibTorch's CMake package does not pass its c10d backends on: Gloo is in every LibTorch build, NCCL in those with
 // CUDA (GAIA_WITH_NCCL, set by CMakeLists.txt).
 #ifndef USE_C10D_GLOO
@@ -72,6 +77,21 @@ RankEnv RankEnv::from_environment() {
   return e;
 }
 
+int RankEnv::free_local_port() {
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (s < 0) fail("cannot open a socket to find a free port");
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  socklen_t len = sizeof a;
+  const bool ok = ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+                  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &len) == 0;
+  ::close(s);
+  if (!ok) fail("cannot find a free port on 127.0.0.1");
+  return ntohs(a.sin_port);
+}
+
 struct Distributed::Impl {
   c10::intrusive_ptr<c10d::TCPStore> store;
   c10::intrusive_ptr<c10d::ProcessGroupGloo> gloo;
@@ -135,20 +155,7 @@ Distributed::Distributed(const RankEnv& env, const torch::Device& device, std::c
   }
 }
 
-void Distributed::all_reduce(torch::Tensor& flat, const std::string& what) {
-  std::vector<torch::Tensor> v{flat};
-  try {
-#ifdef GAIA_WITH_NCCL
-    if (impl_->nccl) {
-      impl_->nccl->allreduce(v)->wait();
-      return;
-    }
-#endif
-    impl_->gloo->allreduce(v)->wait();
-  } catch (const std::exception& e) {
-    lost_contact(env_.rank, what, e.what());
-  }
-}
+void Distributed::all_reduce(torch::Tensor& flat, const std::string& what) { start_sum(flat, what)(); }
 
 void Distributed::barrier() {
   if (!impl_) return;
@@ -156,73 +163,29 @@ void Distributed::barrier() {
   all_reduce(t, "a barrier");  // an all-reduce, so that a dead rank fails it within the timeout like any other
 }
 
-void Distributed::average_gradients(const std::vector<torch::Tensor>& params, double bucket_mb) {
-  if (!impl_) return;
-  torch::NoGradGuard no_grad;
-  const int64_t bucket_elems = std::max<int64_t>(1, int64_t(bucket_mb * 1024 * 1024 / 4));
-  struct Bucket {
-    std::vector<size_t> params;
-    torch::Tensor flat;
-  };
-  std::vector<Bucket> buckets(1);
-  int64_t filled = 0;
-  for (size_t i = 0; i < params.size(); ++i) {
-    if (filled > 0 && filled + params[i].numel() > bucket_elems) {
-      buckets.emplace_back();
-      filled = 0;
-    }
-    buckets.back().params.push_back(i);
-    filled += params[i].numel();
-  }
-  // Which parameters have a gradient on some rank: one unused by every rank keeps none, as in one process.
-  auto has_grad = torch::zeros({int64_t(params.size())});
-  for (size_t i = 0; i < params.size(); ++i)
-    if (params[i].grad().defined()) has_grad[int64_t(i)] = 1;
-  has_grad = has_grad.to(impl_->comm_device);
-  std::vector<c10::intrusive_ptr<c10d::Work>> works;
-  auto start = [&](torch::Tensor& flat) {
-    std::vector<torch::Tensor> v{flat};
-#ifdef GAIA_WITH_NCCL
-    if (impl_->nccl) {
-      works.push_back(impl_->nccl->allreduce(v));
-      return;
-    }
-#endif
-    works.push_back(impl_->gloo->allreduce(v));
-  };
+std::function<void()> Distributed::start_sum(torch::Tensor& flat, const std::string& what) {
+  if (!impl_) return [] {};
+  std::vector<torch::Tensor> v{flat};
+  c10::intrusive_ptr<c10d::Work> work;
   try {
-    start(has_grad);
-    for (auto& bucket : buckets) {
-      std::vector<torch::Tensor> parts;
-      for (size_t i : bucket.params) {
-        const auto& p = params[i];
-        parts.push_back((p.grad().defined() ? p.grad() : torch::zeros_like(p)).reshape({-1}).to(torch::kFloat));
-      }
-      if (parts.empty()) continue;
-      bucket.flat = torch::cat(parts).to(impl_->comm_device);
-      start(bucket.flat);
-    }
-    for (auto& w : works) w->wait();
+#ifdef GAIA_WITH_NCCL
+    if (impl_->nccl) work = impl_->nccl->allreduce(v);
+    else
+#endif
+      work = impl_->gloo->allreduce(v);
   } catch (const std::exception& e) {
-    lost_contact(env_.rank, "averaging gradients", e.what());
+    lost_contact(env_.rank, what, e.what());
   }
-  const auto used_t = has_grad.to(torch::kCPU);
-  const auto used = used_t.accessor<float, 1>();
-  const double inv = 1.0 / double(env_.world_size);
-  for (auto& bucket : buckets) {
-    if (!bucket.flat.defined()) continue;
-    int64_t off = 0;
-    for (size_t i : bucket.params) {
-      auto p = params[i];
-      if (used[int64_t(i)] > 0) {
-        auto g = bucket.flat.narrow(0, off, p.numel()).view(p.sizes()).mul(inv).to(p.device(), p.scalar_type());
-        if (p.grad().defined()) p.mutable_grad().copy_(g);
-        else p.mutable_grad() = g.clone();
-      }
-      off += p.numel();
+  return [work, what, rank = env_.rank] {
+    try {
+      work->wait();
+    } catch (const std::exception& e) {
+      lost_contact(rank, what, e.what());
     }
-  }
+  };
 }
+
+torch::Device Distributed::comm_device() const { return impl_ ? impl_->comm_device : torch::Device(torch::kCPU); }
 
 void Distributed::broadcast(const std::vector<torch::Tensor>& tensors, int root) {
   if (!impl_ || tensors.empty()) return;

@@ -4,6 +4,7 @@
 // (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT), every rank running the same command. Gloo carries CPU
 // tensors; NCCL carries CUDA tensors where LibTorch was built with it (else they travel through the CPU over Gloo).
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@ struct RankEnv {
   std::string master_addr = "127.0.0.1";
   int master_port = 29500;
   static RankEnv from_environment();  // a malformed or inconsistent variable fails naming it
+  static int free_local_port();      // a TCP port free on 127.0.0.1 now: the rendezvous of ranks on this machine
 };
 
 class Distributed;
@@ -29,6 +31,7 @@ struct Parallel {
   Distributed* dist = nullptr;  // this rank's job; nullptr = one process
   int accumulate = 1;           // micro-batches per rank and step
   bool shard_optimizer = false; // ZeRO-1 (train/parallel_adamw.h)
+  bool overlap = true;          // gradients sent during the last backward pass (train/grad_reducer.h)
   // Examples per micro-batch for a batch of `batch` (named `key` in an error when it does not divide evenly).
   int64_t micro_batch(int64_t batch, const std::string& key) const;
   // The first example of this rank's micro-batch k.
@@ -54,9 +57,10 @@ class Distributed {
   static torch::Device rank_device(const torch::Device& requested, const RankEnv& env);
 
   void barrier();
-  // Gradients of `params` summed over the ranks and divided by the world size: flattened into buckets of about
-  // `bucket_mb`, every bucket's all-reduce in flight at once. Parameters without a gradient count as zero.
-  void average_gradients(const std::vector<torch::Tensor>& params, double bucket_mb = 25);
+  // Starts summing the float tensor `flat` (on comm_device()) over the ranks, in place; the function returned waits
+  // for it (a rank lost meanwhile fails with one line naming `what`). Gradients: train/grad_reducer.h.
+  std::function<void()> start_sum(torch::Tensor& flat, const std::string& what);
+  torch::Device comm_device() const;  // where the tensors of a collective live
   // Rank `root`'s values of `tensors` copied into every rank's (one message).
   void broadcast(const std::vector<torch::Tensor>& tensors, int root);
   double sum(double v);  // over the ranks

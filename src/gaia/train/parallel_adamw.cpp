@@ -49,13 +49,14 @@ double global_norm(const std::vector<torch::Tensor>& params) {
 
 }  // namespace
 
-ParallelAdamW::ParallelAdamW(const std::vector<torch::Tensor>& params, const AdamWSettings& s, Distributed& dist,
-                             bool shard)
-    : dist_(dist) {
+ParallelAdamW::ParallelAdamW(const std::vector<torch::Tensor>& params, const AdamWSettings& s, const Parallel& par)
+    : dist_(par.job()) {
+  Distributed& dist = dist_;
   for (const auto& p : params)
     if (p.requires_grad()) params_.push_back(p);
   full_ = make_adamw(params_, s.lr, s.weight_decay, s.beta1, s.beta2);
-  if (!shard) return;
+  if (dist.size() > 1) reducer_ = std::make_unique<GradientReducer>(params_, dist, par.overlap);
+  if (!par.shard_optimizer) return;
   owner_ = partition(params_, dist.size());
   std::vector<torch::Tensor> mine;
   for (size_t i = 0; i < params_.size(); ++i)
@@ -70,8 +71,13 @@ void ParallelAdamW::set_lr(double lr) {
 
 void ParallelAdamW::zero_grad() { full_->zero_grad(); }
 
+void ParallelAdamW::backward(const torch::Tensor& loss, int k, int accumulate) {
+  if (reducer_) reducer_->backward(loss, k + 1 == accumulate);
+  else loss.backward();
+}
+
 double ParallelAdamW::step(double max_norm, double loss_scale) {
-  dist_.average_gradients(params_);
+  if (reducer_) reducer_->finish();
   if (loss_scale != 1) {
     torch::NoGradGuard no_grad;
     for (auto& p : params_)

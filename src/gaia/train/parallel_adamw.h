@@ -1,6 +1,6 @@
 #pragma once
-// AdamW for data-parallel training: after each step's backward passes the gradients are averaged over the ranks and
-// clipped by their global norm; then either every rank updates every parameter (replicated state), or, sharded in
+// AdamW for data-parallel training: the gradients of each step's last backward pass are averaged over the ranks
+// while it runs, then clipped by their global norm; then either every rank updates every parameter (replicated state), or, sharded in
 // the ZeRO-1 manner (Rajbhandari et al. 2020, as DeepSpeed ZeRO in the paper's §4), each rank keeps AdamW's two
 // moments for its own share of the parameters only, updates that share and sends it to the others. Sharding
 // divides the optimiser state (8 bytes per parameter in float32) by the world size.
@@ -13,6 +13,7 @@
 #include <torch/torch.h>
 
 #include "gaia/train/distributed.h"
+#include "gaia/train/grad_reducer.h"
 
 namespace gaia::train {
 
@@ -22,11 +23,14 @@ struct AdamWSettings {
 
 class ParallelAdamW {
  public:
-  // `params`: the trained parameters, in the same order on every rank. `dist` outlives this object.
-  ParallelAdamW(const std::vector<torch::Tensor>& params, const AdamWSettings& s, Distributed& dist, bool shard);
+  // `params`: the trained parameters, in the same order on every rank. `par`'s job outlives this object.
+  ParallelAdamW(const std::vector<torch::Tensor>& params, const AdamWSettings& s, const Parallel& par);
 
   void set_lr(double lr);
   void zero_grad();
+  // loss.backward() for micro-batch k of the step's `accumulate`: the last one's gradients are averaged over the
+  // ranks while the pass runs (train/grad_reducer.h).
+  void backward(const torch::Tensor& loss, int k, int accumulate);
   // Averages the gradients over the ranks, divides them by `loss_scale` (fp16's, torch/precision.h), clips their
   // global norm to `max_norm` (0: no clipping; < 0: neither clipped nor measured, 0 returned), updates the
   // parameters. Returns the norm before clipping; not finite: an overflow, and nothing is updated (every rank sees
@@ -47,6 +51,7 @@ class ParallelAdamW {
   std::unique_ptr<torch::optim::AdamW> full_;  // every parameter: stepped when replicated; the checkpoint's view
   std::unique_ptr<torch::optim::AdamW> own_;   // this rank's share, when sharded
   Distributed& dist_;
+  std::unique_ptr<GradientReducer> reducer_;   // in a job of more than one
 };
 
 }  // namespace gaia::train

@@ -5,6 +5,8 @@
 #include <limits>
 #include <fstream>
 
+#include <torch/version.h>
+
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
 #include "gaia/sizing/sizing.h"
@@ -98,7 +100,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
   model->to(dev);
   auto trained = trained_parameters(*model, opt.train_only);
-  train::ParallelAdamW optim(trained, {wc.lr, wc.weight_decay, wc.beta1, wc.beta2}, dist, opt.parallel.shard_optimizer);
+  train::ParallelAdamW optim(trained, {wc.lr, wc.weight_decay, wc.beta1, wc.beta2}, opt.parallel);
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
@@ -207,6 +209,12 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   LossScaler scaler(precision);
   const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
   model->train();
+  // The peak this run reaches above what it holds now (the weights, the data), against gaia plan's figure for the
+  // same settings: measured on a fresh run of the whole model without a teacher, which the plan describes.
+  const bool measure_memory = step == 0 && !teacher && opt.train_only.empty() && main;
+  const double resident_at_start = sizing::resident_bytes();
+  double peak_resident = 0;  // after each step until the first validation (whose batch differs)
+  bool validated = false;
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
     // The whole step's batch on every rank; each takes its own micro-batches of it.
@@ -250,7 +258,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       }
       // Equal micro-batches: the mean of their mean losses is the whole batch's. fp16 scales the loss.
       const double factor = scaler.scale() / accumulate;
-      (factor != 1 ? loss * factor : loss).backward();
+      optim.backward(factor != 1 ? loss * factor : loss, k, accumulate);
     }
     // Logged over the whole batch: the ranks' means averaged.
     lv = dist.sum(lv) / dist.size();
@@ -258,6 +266,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     if (kl_other >= 0) kl_other = dist.sum(kl_other) / dist.size();
     if (!std::isfinite(lv)) fail("world model training diverged at step {} (loss is not finite)", step);
     const double gn = optim.step(wc.grad_clip, scaler.scale());
+    if (measure_memory && !validated) peak_resident = sizing::peak_resident_bytes();
     const bool skipped = !scaler.update(std::isfinite(gn));  // an overflow: no update this step
     if (skipped && !scaler.active())
       fail("world model training diverged at step {} (the gradient is not finite)", step);
@@ -273,6 +282,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (main && loop.validate_now(step, opt.val_every)) {
+      validated = true;
       log.validation = true;
       log.val = validate();
       result.last_val = log.val;
@@ -291,6 +301,17 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   }
   result.final_step = step;
   result.best_bits = best_bits;
+  if (measure_memory && peak_resident > 0 && resident_at_start > 0) {
+    const auto settings = sizing::train_memory_settings(cfg, dist.size(), accumulate, opt.parallel.shard_optimizer,
+                                                        TORCH_VERSION_MAJOR >= 2);
+    const auto plan = sizing::world_train_memory(cfg, settings);
+    result.peak_memory_beyond_start = peak_resident - resident_at_start;
+    result.planned_memory_beyond_weights = plan.beyond_weights();
+    note(fmt::format("memory: the peak was {:.0f} MB above the start of training; gaia plan puts it at {:.0f} MB "
+                     "beyond the weights (micro-batch {}, {}, {} attention)",
+                     result.peak_memory_beyond_start / 1e6, plan.beyond_weights() / 1e6, settings.micro_batch,
+                     cfg.run.precision, settings.fused_attention ? "fused" : "unfused"));
+  }
   if (main && fs::exists(best_json)) result.best_step = read_json(best_json).value("step", -1);
   if (main && step >= total) save_world(model, info, opt.out / "world.safetensors");
   return result;

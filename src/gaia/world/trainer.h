@@ -58,6 +58,9 @@ struct WorldTrainResult {
   int best_step = -1;       // the validation with the lowest bits/token (OUT/best.safetensors); -1 = none
   double best_bits = 0;
   std::vector<std::string> notes;
+  // Rank 0 of a fresh run without a teacher: resident memory at its peak above the start of training, and what
+  // gaia plan predicts for it (sizing::world_train_memory, beyond the weights); 0 otherwise.
+  double peak_memory_beyond_start = 0, planned_memory_beyond_weights = 0;
 };
 
 WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
