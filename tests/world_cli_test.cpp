@@ -599,3 +599,51 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_NE(r.output.find("not a dynamics probe"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "bad" / "eval.json"));
 }
+
+// gaia sim --stdio: a session made from an episode of the token dataset and stepped with `generate`'s command gives
+// `generate`'s tokens (same seed, guidance and sampling from the weights); frames come back as PNG through the
+// tokenizer; every line gets one answer line, bad ones a 4xx, and the session keeps serving.
+TEST(SimCli, StdioSessionsGiveTheTokensOfGenerateAndAnswerEveryLine) {
+  auto& p = Pipeline::get();
+  auto r = test::run_gaia("generate " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() +
+                          " --episode 0 --prompt-frames 2 --frames 3 --steer left --speed 8 --seed 5 --out " +
+                          q(p.dir / "gen-sim"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile rollout(p.dir / "gen-sim" / "rollout.safetensors");
+  const auto t = tensor_from_view(rollout.get("tokens")).to(torch::kFloat).reshape({-1});  // [1, 5, h, w]
+  const std::vector<float> expected(t.data_ptr<float>(), t.data_ptr<float>() + t.numel());
+  const fs::path requests = p.dir / "sim-requests.jsonl";
+  write_file_atomic(requests,
+                    "{\"op\": \"create\", \"prompt\": {\"episode\": 0, \"frames\": 2}, \"seed\": 5}\n"
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n"
+                    "not json\n"
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01, \"frame\": true}\n"
+                    "{\"op\": \"step\", \"session\": 7}\n"
+                    "{\"op\": \"create\", \"prompt\": {\"episode\": \"nowhere\"}}\n"
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n");
+  r = test::run_shell(test::gaia_command("sim " + q(p.tokens) + " --world " + q(p.trained) + " --tokenizer " +
+                                         q(p.tok / "tokenizer.safetensors") + p.tiny() + " --stdio") +
+                      " < " + q(requests) + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::vector<nlohmann::json> answers;
+  std::istringstream lines(r.output);
+  for (std::string line; std::getline(lines, line);) answers.push_back(nlohmann::json::parse(line));
+  ASSERT_EQ(answers.size(), 7u) << r.output;
+  const std::vector<int> statuses = {200, 200, 400, 200, 404, 400, 200};
+  for (size_t i = 0; i < answers.size(); ++i) EXPECT_EQ(answers[i]["status"], statuses[i]) << answers[i].dump();
+  EXPECT_EQ(answers[0]["steps"], 2);
+  EXPECT_NE(answers[5]["error"].get<std::string>().find("nowhere"), std::string::npos);
+  EXPECT_EQ(answers[3]["frame"].get<std::string>().rfind("data:image/png;base64,", 0), 0u);
+  const size_t n = expected.size() / 5;
+  size_t k = 2;
+  for (size_t i : {1, 3, 6}) {
+    auto got = answers[i]["tokens"].get<std::vector<int64_t>>();
+    ASSERT_EQ(got.size(), n);
+    for (size_t j = 0; j < n; ++j) EXPECT_EQ(double(got[j]), expected[k * n + j]) << "step " << k << " token " << j;
+    EXPECT_EQ(answers[i]["step"], k);
+    ++k;
+  }
+  auto no = test::run_gaia("sim --world " + q(p.trained) + p.tiny());
+  EXPECT_NE(no.status, 0);
+  EXPECT_NE(no.output.find("--stdio"), std::string::npos) << no.output;
+}

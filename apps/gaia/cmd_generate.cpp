@@ -129,14 +129,7 @@ void register_generate(CLI::App& app) {
       if (ds.grid_h() != info.grid_h || ds.grid_w() != info.grid_w)
         fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g->tokens, ds.grid_h(), ds.grid_w(), g->world,
              info.grid_h, info.grid_w);
-      size_t e = 0;
-      if (!g->episode.empty()) {
-        auto it = std::find(ds.ids().begin(), ds.ids().end(), g->episode);
-        if (it != ds.ids().end()) e = size_t(it - ds.ids().begin());
-        else if (g->episode.find_first_not_of("0123456789") == std::string::npos && std::stoul(g->episode) < ds.size())
-          e = std::stoul(g->episode);
-        else fail("--episode: '{}' is not an episode id or index of {}", g->episode, g->tokens);
-      }
+      const size_t e = g->episode.empty() ? 0 : ds.find(g->episode);
       P = std::min<int64_t>(want_p, ds.steps(e) - g->start);
       if (P <= 0) fail("--start {} is past the end of episode {} ({} steps)", g->start, ds.ids()[e], ds.steps(e));
       auto ep = ds.episode(e);

@@ -153,5 +153,6 @@ void register_convert(CLI::App& app);   // gaia convert --half / --set
 void register_eval(CLI::App& app);      // gaia eval (action / text control, futures, long rollouts)
 void register_train_all(CLI::App& app); // gaia train-all (the whole recipe)
 void register_report(CLI::App& app);    // gaia report RUN_DIR
+void register_sim(CLI::App& app);       // gaia sim --stdio (closed-loop sessions)
 
 }  // namespace gaia::app

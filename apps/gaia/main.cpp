@@ -124,6 +124,7 @@ int main(int argc, char** argv) {
   gaia::app::register_eval(app);
   gaia::app::register_train_all(app);
   gaia::app::register_report(app);
+  gaia::app::register_sim(app);
   gaia::app::check_numbers(app);
   try {
     app.parse(argc, argv);

@@ -107,79 +107,107 @@ torch::Tensor counter_actions(const torch::Tensor& actions, int64_t from, const 
   return m;
 }
 
+RolloutStepper::RolloutStepper(WorldModel& model, const RolloutOptions& o, int64_t futures)
+    : model_(model), o_(o), N_(futures), guided_(o.guidance.active()),
+      dev_(model->token_embedding->weight.device()), gen_(at::detail::createCPUGenerator(o.seed)) {
+  if (futures < 1) fail("rollout needs futures >= 1 (got {})", futures);
+  if (o.window_stride < 1 || o.window_stride >= model->layout.T)
+    fail("window stride must be in [1, T - 1 = {}] (got {})", model->layout.T - 1, o.window_stride);
+  const int64_t B = guided_ ? 2 * N_ : N_;
+  cache_ = model->make_cache(B, model->layout.length());
+  tokens_ = torch::zeros({B, 8, model->layout.n}, torch::TensorOptions().dtype(torch::kLong).device(dev_));
+}
+
+torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& given) {
+  torch::NoGradGuard ng;
+  model_->eval();
+  const auto& L = model_->layout;
+  const int64_t B = guided_ ? 2 * N_ : N_, n = L.n, d = model_->d, k = k_;
+  Conditioner cond{p, N_, guided_, dev_};
+  if (k >= tokens_.size(1)) {  // room for twice as many steps
+    auto grown = torch::zeros({B, 2 * tokens_.size(1), n}, tokens_.options());
+    grown.narrow(1, 0, k).copy_(tokens_.narrow(1, 0, k));
+    tokens_ = grown;
+  }
+  if (win_ == L.T) {
+    // Sliding window: keep the last T - stride steps, re-embedded at temporal positions 0..T-stride-1.
+    const int64_t first = k - (L.T - o_.window_stride);
+    cache_.reset();
+    auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first));
+    model_->body(model_->embed(hist, 0), &cache_);
+    win_ = L.T - o_.window_stride;
+  }
+  ++k_;
+  if (given.defined()) {  // a prompt frame: the whole step at once
+    auto g = given.to(dev_).to(torch::kLong).view({-1, n});
+    if (g.size(0) == 1) g = g.expand({B, n});
+    else if (g.size(0) == N_ && guided_) g = torch::cat({g, g});
+    if (g.size(0) != B) fail("a prompt frame must be [n] or [futures = {}, n] tokens (got {} rows)", N_, g.size(0));
+    tokens_.select(1, k).copy_(g);
+    model_->body(model_->embed(cond.at(k, k + 1, tokens_.narrow(1, k, 1)), win_), &cache_);
+    ++win_;
+    return tokens_.select(1, k).narrow(0, 0, N_);
+  }
+  const bool text_guided = p.text_ids.defined() || p.text_emb.defined() || p.negative_text_ids.defined() ||
+                           p.negative_text_emb.defined();
+  const bool within = guided_ && !text_guided && o_.sampling.guide_actions_within_top_k &&
+                      o_.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
+  auto sb = cond.at(k, k + 1, tokens_.narrow(1, k, 1));
+  auto h = model_->body(model_->embed_text(sb, win_).view({B, L.m, d}), &cache_);
+  auto last = h.select(1, h.size(1) - 1);  // [B, d]
+  for (int64_t i = 0; i < n; ++i) {
+    auto lg = model_->logits(last).to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
+    if (k > 0 && model_->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
+      lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);
+    torch::Tensor tok;
+    if (guided_) {
+      auto c = lg.narrow(0, 0, N_);
+      auto l = guide(c, lg.narrow(0, N_, N_), o_.guidance.at(int(generated_), int(i), int(n)));
+      if (within) l = keep_top_k(l, c, o_.sampling.top_k);
+      tok = sample_tokens(l, o_.sampling, gen_);
+      tok = torch::cat({tok, tok});  // both halves continue from the same chosen token
+    } else {
+      tok = sample_tokens(lg, o_.sampling, gen_);
+    }
+    tokens_.select(1, k).select(1, i).copy_(tok);
+    h = model_->body(model_->embed_image(tok.view({B, 1, 1}), win_, i).view({B, 1, d}), &cache_);
+    last = h.select(1, 0);
+  }
+  model_->body(model_->embed_actions(sb, win_).view({B, L.l, d}), &cache_);
+  ++win_;
+  ++generated_;
+  return tokens_.select(1, k).narrow(0, 0, N_);
+}
+
+torch::Tensor RolloutStepper::tokens() const { return tokens_.narrow(0, 0, N_).narrow(1, 0, k_); }
+
+RolloutStepper RolloutStepper::fork() const {
+  RolloutStepper c(*this);
+  c.tokens_ = tokens_.clone();
+  for (auto& t : c.cache_.k) t = t.clone();
+  for (auto& t : c.cache_.v) t = t.clone();
+  c.gen_ = gen_.clone();
+  return c;
+}
+
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int, int)>& on_frame) {
   auto t_start = std::chrono::steady_clock::now();
-  torch::NoGradGuard ng;
-  model->eval();
-  const auto& L = model->layout;
   const bool has_prompt = prompt.tokens.defined() && prompt.tokens.numel() > 0;
   const int64_t P = has_prompt ? prompt.tokens.size(-2) : 0, F = o.frames, steps = P + F;
   if (F < 0 || o.futures < 1) fail("rollout needs frames >= 0 and futures >= 1 (got {} and {})", F, o.futures);
-  if (o.window_stride < 1 || o.window_stride >= L.T)
-    fail("window stride must be in [1, T - 1 = {}] (got {})", L.T - 1, o.window_stride);
+  RolloutStepper stepper(model, o, o.futures);
   check_prompt(*model, prompt, o.futures, P, steps);
-  const torch::Device dev = model->token_embedding->weight.device();
-  const int64_t N = o.futures;
-  const bool guided = o.guidance.active();
-  const int64_t B = guided ? 2 * N : N, n = L.n, d = model->d;
-  Conditioner cond{prompt, N, guided, dev};
-  const bool text_guided = prompt.text_ids.defined() || prompt.text_emb.defined() ||
-                           prompt.negative_text_ids.defined() || prompt.negative_text_emb.defined();
-  const bool within = guided && !text_guided && o.sampling.guide_actions_within_top_k &&
-                      o.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
-  auto gen = at::detail::createCPUGenerator(o.seed);
-
-  auto all = torch::zeros({B, steps, n}, torch::TensorOptions().dtype(torch::kLong).device(dev));
-  if (P > 0) {
-    auto pt = prompt.tokens.to(dev).to(torch::kLong);
-    if (pt.dim() == 3) all.narrow(1, 0, P).copy_(guided ? torch::cat({pt, pt}) : pt);  // one prompt per future
-    else all.narrow(1, 0, P).copy_(pt.unsqueeze(0).expand({B, P, n}));
-  }
-  KVCache cache = model->make_cache(B, L.length());
-  int64_t win = 0;      // steps in the cache; the current step sits at temporal position `win`
-  int64_t first = 0;    // global index of the cache's first step
   for (int64_t k = 0; k < steps; ++k) {
-    if (win == L.T) {
-      // Sliding window: keep the last T - stride steps, re-embedded at temporal positions 0..T-stride-1.
-      first = k - (L.T - o.window_stride);
-      cache.reset();
-      auto hist = cond.at(first, k, all.narrow(1, first, k - first));
-      model->body(model->embed(hist, 0), &cache);
-      win = L.T - o.window_stride;
-    }
-    if (k < P) {  // a prompt frame: the whole step at once
-      model->body(model->embed(cond.at(k, k + 1, all.narrow(1, k, 1)), win), &cache);
-      ++win;
+    if (k < P) {
+      stepper.step(prompt, prompt.tokens.dim() == 3 ? prompt.tokens.select(1, k) : prompt.tokens[k]);
       continue;
     }
-    auto sb = cond.at(k, k + 1, all.narrow(1, k, 1));
-    auto h = model->body(model->embed_text(sb, win).view({B, L.m, d}), &cache);
-    auto last = h.select(1, h.size(1) - 1);  // [B, d]
-    for (int64_t i = 0; i < n; ++i) {
-      auto lg = model->logits(last).to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
-      if (k > 0 && model->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
-        lg = with_copy_bias(lg, all.select(1, k - 1).select(1, i), model->cfg.copy_bias);
-      torch::Tensor tok;
-      if (guided) {
-        auto c = lg.narrow(0, 0, N);
-        auto l = guide(c, lg.narrow(0, N, N), o.guidance.at(int(k - P), int(i), int(n)));
-        if (within) l = keep_top_k(l, c, o.sampling.top_k);
-        tok = sample_tokens(l, o.sampling, gen);
-        tok = torch::cat({tok, tok});  // both halves continue from the same chosen token
-      } else {
-        tok = sample_tokens(lg, o.sampling, gen);
-      }
-      all.select(1, k).select(1, i).copy_(tok);
-      h = model->body(model->embed_image(tok.view({B, 1, 1}), win, i).view({B, 1, d}), &cache);
-      last = h.select(1, 0);
-    }
-    model->body(model->embed_actions(sb, win).view({B, L.l, d}), &cache);
-    ++win;
+    stepper.step(prompt);
     if (on_frame) on_frame(int(k - P + 1), int(F));
   }
   RolloutResult r;
-  r.tokens = all.narrow(0, 0, N).to(torch::kCPU);
+  r.tokens = stepper.tokens().to(torch::kCPU);
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   return r;
 }

@@ -52,6 +52,33 @@ struct RolloutResult {
 // command at the kept speed is then not guided.
 torch::Tensor counter_actions(const torch::Tensor& actions, int64_t from, const torch::Tensor& kept_speed = {});
 
+// One rollout advanced a step at a time: what rollout() runs, and what a closed-loop session (sim/) steps as its
+// actions arrive. Each step's conditioning is read from a RolloutPrompt whose per-step rows cover that step (they
+// may grow between steps); step k's frame is either given (a prompt frame) or sampled.
+class RolloutStepper {
+ public:
+  RolloutStepper(WorldModel& model, const RolloutOptions& o, int64_t futures);
+  // Step k = steps(): encodes `given` ([N, n] or [n]-rows to repeat: a prompt frame) or samples the frame, and
+  // returns its tokens [N, n] (on the model's device). `cond`'s rows must cover steps 0..k.
+  torch::Tensor step(const RolloutPrompt& cond, const torch::Tensor& given = {});
+  int64_t steps() const { return k_; }
+  int64_t generated() const { return generated_; }
+  torch::Tensor tokens() const;        // [N, steps(), n] every step so far
+  RolloutStepper fork() const;         // an independent copy: the same state, cache and random stream
+
+ private:
+  WorldModel& model_;
+  RolloutOptions o_;
+  int64_t N_;
+  bool guided_;
+  torch::Device dev_;
+  at::Generator gen_;
+  KVCache cache_;
+  torch::Tensor tokens_;  // [B, capacity, n], B = 2N with guidance (the unconditional rows copy the conditional)
+  int64_t k_ = 0, generated_ = 0;
+  int64_t win_ = 0;       // steps in the cache; the current step sits at temporal position `win_`
+};
+
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int generated, int total)>& on_frame = {});
 

@@ -411,4 +411,12 @@ WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, 
   return ds.make_batch(windows, vocab, cfg.text_tokens, ConditioningMix::from(cfg), rng);
 }
 
+size_t TokenDataset::find(const std::string& id) const {
+  auto it = std::find(ids_.begin(), ids_.end(), id);
+  if (it != ids_.end()) return size_t(it - ids_.begin());
+  if (!id.empty() && id.size() < 10 && id.find_first_not_of("0123456789") == std::string::npos && std::stoul(id) < ids_.size())
+    return std::stoul(id);
+  fail("'{}' is not an episode id or index of {} ({} episodes)", id, path_.string(), ids_.size());
+}
+
 }  // namespace gaia::world

@@ -81,6 +81,8 @@ class TokenDataset {
 
   size_t size() const { return ids_.size(); }  // episodes
   const std::vector<std::string>& ids() const { return ids_; }
+  // The episode named `id`, or at index `id` when no episode has that name; an error names both otherwise.
+  size_t find(const std::string& id) const;
   const data::EpisodeMeta& meta(size_t e) const { return info_.at(e).meta; }
   int64_t steps(size_t e) const { return info_.at(e).steps; }
   const std::vector<float>& actions(size_t e) const { return info_.at(e).actions; }  // [steps * 2] m/s, 1/m; NaN

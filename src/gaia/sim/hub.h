@@ -1,0 +1,71 @@
+#pragma once
+// The JSON protocol of `gaia sim` (docs/sim.md): one request, one answer, the same for the stdin/stdout mode and
+// the HTTP server. The hub holds the sessions of one world model, within limits: at most `max_sessions`, each
+// answering one request at a time with at most `max_queue` waiting (more: 429, not a pile-up), idle ones closed
+// after `idle_s`. A bad request (unknown op or field, wrong type, NaN, out of range, unknown session) is a 4xx
+// with one line, and changes nothing.
+#include <chrono>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "gaia/sim/session.h"
+
+namespace gaia::sim {
+
+struct HubLimits {
+  int max_sessions = 8;
+  int max_queue = 4;       // requests that may wait while a session answers another
+  double idle_s = 600;     // a session untouched this long is closed
+};
+
+struct HubReply {
+  int status = 200;        // 200; 400 bad request; 404 unknown session or op; 429 full or busy
+  nlohmann::json body;     // {"error": "..."} unless 200
+};
+
+// What the app supplies: a create request's "prompt" object other than {"tokens": ..., "actions": ...} (which the
+// hub reads itself) -> the prompt's tokens [P, n] and actions [P, 2] (m/s, 1/m; undefined = none), failing with one
+// line on a bad one; and a frame's tokens [n] -> what a step returns as "frame" when asked (a data: URI of a PNG;
+// null where this build cannot decode).
+struct Prompt {
+  torch::Tensor tokens, actions;
+};
+using PromptSource = std::function<Prompt(const nlohmann::json& prompt)>;
+using FrameEncoder = std::function<nlohmann::json(const torch::Tensor& tokens)>;
+
+class SessionHub {
+ public:
+  SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits, PromptSource prompts,
+             FrameEncoder frames = {});
+  // op: create | step | fork | reset | close | status.
+  HubReply handle(const std::string& op, const nlohmann::json& request);
+  size_t sessions() const;
+
+ private:
+  struct Entry {
+    std::unique_ptr<SimSession> session;
+    std::mutex busy;          // one request at a time
+    int pending = 0;          // requests being answered or waiting for `busy` (under the hub's lock)
+    std::chrono::steady_clock::time_point used;
+  };
+  world::WorldModel& model_;
+  const world::WorldInfo& info_;
+  HubLimits limits_;
+  PromptSource prompts_;
+  FrameEncoder frames_;
+  mutable std::mutex lock_;  // the map and the queue counts
+  std::map<int64_t, std::shared_ptr<Entry>> sessions_;
+  int64_t next_id_ = 1;
+
+  void expire();  // under lock_
+  HubReply create(const nlohmann::json& r);
+  HubReply with_session(const nlohmann::json& r, const std::function<HubReply(Entry&, int64_t id)>& f);
+  HubReply add(std::unique_ptr<SimSession> s, nlohmann::json body);
+};
+
+}  // namespace gaia::sim

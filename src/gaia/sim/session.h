@@ -1,0 +1,75 @@
+#pragma once
+// A closed-loop session with the world model (DESIGN.md, "closed loop"): a policy or a person sends an action per
+// step and gets the next frame's tokens, made exactly as `gaia generate` makes them (KV cache, sliding window,
+// guidance with the counter-command as the negative), so a session stepped with a fixed action sequence and seed
+// gives the tokens of `gaia generate` with that sequence and seed. fork() branches a session into an independent
+// copy of its whole state (cache, history, random stream): a planner tries several actions from one state.
+// Frames are tokens here; decoding them to pixels is the caller's (the tokenizer's decoder), so this stays free of
+// video code.
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include <torch/torch.h>
+
+#include "gaia/world/io.h"
+#include "gaia/world/rollout.h"
+
+namespace gaia::sim {
+
+struct SessionSettings {
+  uint64_t seed = 0;
+  double guidance_scale = -1;   // -1: the weights' world.guidance_scale (§5.1 classifier-free guidance)
+  std::string sampling = "top-k";
+  int top_k = -1;               // -1: the weights' world.top_k
+  double temperature = -1;      // -1: the weights' world.temperature
+  int window_stride = 1;        // §2.3: slide the window by one step
+  bool mirror_negative = true;  // guidance contrasts a command with its mirror image at the prompt's speed
+};
+
+struct Action {
+  double speed = std::numeric_limits<double>::quiet_NaN();      // m/s; NaN: no command
+  double curvature = std::numeric_limits<double>::quiet_NaN();  // 1/m, + = left
+};
+
+// Fails with one line naming the value unless speed is in [0, 100] m/s and curvature in [-0.5, 0.5] 1/m (NaN: none).
+void check_action(const Action& a);
+
+class SimSession {
+ public:
+  // `model` outlives the session (sessions of one model share its weights).
+  SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s);
+
+  // The video prompt: `tokens` [P, n] (P may be 0: from nothing), their actions [P, 2] in m/s and 1/m (NaN where
+  // unknown; undefined = none) and a text prompt ("" = none). P must leave room for a generated step in the context.
+  void start(const torch::Tensor& tokens, const torch::Tensor& actions = {}, const std::string& text = "");
+  // The next frame's tokens [n] (int64, CPU) under `a`; `text` replaces the text prompt from this step on.
+  torch::Tensor step(const Action& a, const std::optional<std::string>& text = std::nullopt);
+  // Back to the state start() left (the same random stream again).
+  void reset();
+  SimSession fork() const;
+
+  int64_t steps() const { return stepper_ ? stepper_->steps() : 0; }  // prompt frames + generated frames
+  int64_t prompt_frames() const { return P_; }
+  const std::string& text() const { return text_; }
+  torch::Tensor tokens() const;  // [steps, n] every frame so far, prompt first
+
+ private:
+  world::WorldModel* model_;
+  const world::WorldInfo* info_;
+  world::RolloutOptions o_;
+  bool mirror_;
+  // Per-step conditioning, one row per step so far (+1 while stepping), as rollout() reads it.
+  world::RolloutPrompt cond_;
+  torch::Tensor prompt_tokens_, prompt_actions_;  // start()'s arguments, for reset()
+  std::string prompt_text_, text_;
+  int64_t P_ = 0;
+  double kept_speed_ = 8.0;  // m/s: the counter-command's speed (the prompt's last, as gaia generate)
+  std::optional<world::RolloutStepper> stepper_;
+
+  void append_row(const Action& a);
+  torch::Tensor text_row(const std::string& text) const;
+};
+
+}  // namespace gaia::sim

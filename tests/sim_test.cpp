@@ -1,0 +1,235 @@
+// Closed-loop sessions (sim/session.h): a session stepped with a fixed action sequence gives the tokens of a
+// rollout with that sequence and seed (guided against the counter-command, past the sliding window); a fork
+// continues exactly as its parent would and apart from it; reset() replays; bad input is one clear error. The
+// JSON protocol (sim/hub.h) in process.
+#include <atomic>
+#include <mutex>
+#include <thread>
+#include <tuple>
+
+#include <torch/torch.h>
+
+#include "gaia/config.h"
+#include "gaia/sim/hub.h"
+#include "gaia/sim/session.h"
+#include "gaia/world/batch.h"
+#include "gaia/world/rollout.h"
+#include "test_util.h"
+
+using namespace gaia;
+
+namespace {
+
+constexpr int64_t kN = 6, kK = 32;
+
+struct Fixture {
+  world::WorldInfo info;
+  world::WorldModel model{nullptr};
+  Fixture() {
+    info.config = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+    info.config.world.guidance_scale = 3;
+    info.config.world.top_k = 8;
+    info.grid_h = 2;
+    info.grid_w = 3;
+    info.K = kK;
+    torch::manual_seed(12);
+    model = world::WorldModel(info.config.world, kN, kK);
+    model->eval();
+  }
+};
+
+}  // namespace
+
+TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
+  Fixture f;
+  const int64_t T = f.model->layout.T, P = 2, F = T + 3;  // past the window: the history is re-encoded
+  torch::manual_seed(3);
+  auto prompt = torch::randint(0, kK, {P, kN}, torch::kLong);
+  auto prompt_actions = torch::tensor({{7.0f, 0.001f}, {7.5f, 0.002f}});
+  std::vector<sim::Action> commands;
+  for (int64_t k = 0; k < F; ++k) commands.push_back({6.0 + 0.2 * double(k), k % 3 == 0 ? 0.01 : -0.005});
+
+  // As gaia generate builds it: normalised actions for every step, the counter-command from step P on.
+  world::RolloutPrompt p;
+  p.tokens = prompt;
+  auto acts = torch::empty({P + F, 2});
+  for (int64_t k = 0; k < P + F; ++k) {
+    const double v = k < P ? prompt_actions[k][0].item<double>() : commands[size_t(k - P)].speed;
+    const double c = k < P ? prompt_actions[k][1].item<double>() : commands[size_t(k - P)].curvature;
+    acts[k][0] = v / world::kSpeedScale;
+    acts[k][1] = c / world::kCurvatureScale;
+  }
+  p.actions = acts;
+  p.negative_actions = world::counter_actions(acts, P, torch::tensor(7.5));
+  world::RolloutOptions o;
+  o.frames = int(F);
+  o.seed = 9;
+  o.sampling.top_k = 8;
+  o.sampling.temperature = f.info.config.world.temperature;
+  o.sampling.guide_actions_within_top_k = f.info.config.world.guide_actions_within_top_k;
+  o.guidance.scale = 3;
+  auto expected = world::rollout(f.model, p, o).tokens[0];  // [P + F, n]
+
+  sim::SessionSettings s;
+  s.seed = 9;
+  sim::SimSession session(f.model, f.info, s);
+  session.start(prompt, prompt_actions);
+  EXPECT_EQ(session.steps(), P);
+  for (int64_t k = 0; k < F; ++k) {
+    auto tok = session.step(commands[size_t(k)]);
+    ASSERT_EQ(tok.sizes(), torch::IntArrayRef({kN}));
+    EXPECT_TRUE(torch::equal(tok, expected[P + k])) << "step " << k;
+  }
+  EXPECT_TRUE(torch::equal(session.tokens(), expected));
+}
+
+TEST(SimSession, AForkContinuesAsItsParentAndApartFromIt) {
+  Fixture f;
+  sim::SessionSettings s;
+  s.seed = 4;
+  s.sampling = "sample";
+  sim::SimSession a(f.model, f.info, s);
+  torch::manual_seed(5);
+  a.start(torch::randint(0, kK, {2, kN}, torch::kLong), {}, "rain");
+  for (int i = 0; i < 3; ++i) a.step({8, 0});
+  auto b = a.fork();
+  // The same commands: the same frames, past the window, whichever steps first.
+  std::vector<torch::Tensor> from_b;
+  for (int i = 0; i < 6; ++i) from_b.push_back(b.step({8, 0.01}));
+  for (int i = 0; i < 6; ++i) EXPECT_TRUE(torch::equal(a.step({8, 0.01}), from_b[size_t(i)])) << i;
+  // Other commands on the fork leave the parent's history as it was.
+  auto c = a.fork();
+  for (int i = 0; i < 3; ++i) c.step({2, -0.02}, "night");
+  EXPECT_EQ(c.text(), "night");
+  EXPECT_EQ(a.text(), "rain");
+  EXPECT_EQ(a.steps(), 11);
+  EXPECT_EQ(c.steps(), 14);
+  EXPECT_TRUE(torch::equal(c.tokens().narrow(0, 0, 11), a.tokens()));
+  // reset(): back to the prompt, the same random stream.
+  auto first = a.tokens().narrow(0, 2, 3).clone();
+  a.reset();
+  EXPECT_EQ(a.steps(), 2);
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(torch::equal(a.step({8, 0}), first[i])) << i;
+}
+
+TEST(SimSession, BadInputIsOneClearError) {
+  Fixture f;
+  sim::SimSession s(f.model, f.info, {});
+  EXPECT_NE(test::error_of([&] { s.step({8, 0}); }).find("after start()"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.start(torch::full({2, kN}, kK, torch::kLong)); }).find("[0, K = 32)"),
+            std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kN + 1}, torch::kLong)); }).find("n = 6"),
+            std::string::npos);
+  const int64_t T = f.model->layout.T;
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({T, kN}, torch::kLong)); }).find("at most"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kN}, torch::kLong), torch::zeros({3, 2})); })
+                .find("prompt actions"),
+            std::string::npos);
+  s.start(torch::zeros({1, kN}, torch::kLong));
+  EXPECT_NE(test::error_of([&] { s.step({std::nan(""), 0.7}); }).find("curvature"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.step({-1, 0}); }).find("speed"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.step({INFINITY, 0}); }).find("finite"), std::string::npos);
+  EXPECT_EQ(s.steps(), 1);  // nothing was stepped by the refused actions
+  EXPECT_NE(test::error_of([&] { sim::SessionSettings bad; bad.window_stride = 0; sim::SimSession x(f.model, f.info, bad); })
+                .find("window stride"),
+            std::string::npos);
+}
+
+namespace {
+
+nlohmann::json raw_prompt(int64_t frames) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int64_t k = 0; k < frames; ++k) rows.push_back(std::vector<int64_t>(kN, (3 * k) % kK));
+  return {{"tokens", rows}, {"actions", nlohmann::json::array({{7.0, 0.001}, {7.5, nullptr}})}};
+}
+
+}  // namespace
+
+// The JSON protocol in process: create / step / fork / reset / close / status, the same tokens as a session, and
+// every bad request a 4xx with one line that leaves the hub serving.
+TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) {
+  Fixture f;
+  sim::SessionHub hub(f.model, f.info, {2, 0, 600}, {}, [](const torch::Tensor& t) { return t.sum().item<int64_t>(); });
+  auto r = hub.handle("create", {{"prompt", raw_prompt(2)}, {"seed", 9}, {"text", "rain"}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  const auto id = r.body["session"].get<int64_t>();
+  EXPECT_EQ(r.body["steps"], 2);
+  // The same as a session made directly.
+  sim::SessionSettings s;
+  s.seed = 9;
+  sim::SimSession direct(f.model, f.info, s);
+  direct.start(torch::stack({torch::full({kN}, 0, torch::kLong), torch::full({kN}, 3, torch::kLong)}),
+               torch::tensor({{7.0f, 0.001f}, {7.5f, NAN}}), "rain");
+  for (int k = 0; k < 3; ++k) {
+    r = hub.handle("step", {{"session", id}, {"speed", 8}, {"curvature", 0.01}, {"frame", true}});
+    ASSERT_EQ(r.status, 200) << r.body.dump();
+    auto expected = direct.step({8, 0.01});
+    EXPECT_EQ(r.body["tokens"].get<std::vector<int64_t>>(),
+              std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kN));
+    EXPECT_EQ(r.body["frame"], expected.sum().item<int64_t>());  // the app's encoder, called on the frame's tokens
+    EXPECT_EQ(r.body["step"], 2 + k);
+  }
+  r = hub.handle("fork", {{"session", id}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  const auto fork = r.body["session"].get<int64_t>();
+  EXPECT_EQ(r.body["steps"], 5);
+  // The hub is full (2 sessions): a third is refused, not queued.
+  r = hub.handle("create", nlohmann::json::object());
+  EXPECT_EQ(r.status, 429);
+  EXPECT_NE(r.body["error"].get<std::string>().find("close one"), std::string::npos);
+
+  const std::vector<std::tuple<std::string, nlohmann::json, int, std::string>> bad = {
+      {"step", {{"session", id}, {"speed", 101}}, 400, "'speed' must be in [0, 100]"},
+      {"step", {{"session", id}, {"speed", "fast"}}, 400, "'speed' must be a number"},
+      {"step", {{"session", id}, {"steer", 1}}, 400, "unknown field 'steer'"},
+      {"step", {{"session", 99}}, 404, "no session 99"},
+      {"step", {{"speed", 8}}, 400, "'session'"},
+      {"drive", nlohmann::json::object(), 404, "unknown request 'drive'"},
+      {"create", {{"prompt", {{"tokens", {{1, 2}}}}}}, 400, "'prompt.tokens[0]' must be a list of 6 ids"},
+      {"create", {{"prompt", {{"episode", "a"}}}}, 400, "no token dataset"},
+      {"create", {{"guidance", -1}}, 400, "'guidance' must be in [0, 100]"},
+  };
+  for (const auto& [op, req, status, words] : bad) {
+    r = hub.handle(op, req);
+    EXPECT_EQ(r.status, status) << op << " " << req.dump() << ": " << r.body.dump();
+    EXPECT_NE(r.body["error"].get<std::string>().find(words), std::string::npos) << r.body.dump();
+  }
+  // Nothing above stepped a session; the fork then goes on as the parent would.
+  r = hub.handle("step", {{"session", fork}, {"speed", 8}, {"curvature", 0.01}});
+  auto expected = direct.step({8, 0.01});
+  EXPECT_EQ(r.body["step"], 5);
+  EXPECT_EQ(r.body["tokens"].get<std::vector<int64_t>>(),
+            std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kN));
+  EXPECT_EQ(hub.handle("reset", {{"session", id}}).body["steps"], 2);
+  EXPECT_EQ(hub.handle("close", {{"session", fork}}).status, 200);
+  EXPECT_EQ(hub.handle("step", {{"session", fork}}).status, 404);
+  EXPECT_EQ(hub.sessions(), 1u);
+  EXPECT_EQ(hub.handle("status", nlohmann::json::object()).body["sessions"].size(), 1u);
+}
+
+// A session answers one request at a time: while one waits in it (a slow frame encoder), another to the same
+// session is refused at once with max_queue 0, and one to another session is answered.
+TEST(SimHub, ABusySessionRefusesRatherThanPilesUp) {
+  Fixture f;
+  std::mutex gate;
+  gate.lock();
+  std::atomic<bool> inside{false};
+  sim::SessionHub hub(f.model, f.info, {4, 0, 600}, {}, [&](const torch::Tensor&) {
+    inside = true;
+    std::lock_guard<std::mutex> wait(gate);
+    return nlohmann::json(nullptr);
+  });
+  const auto a = hub.handle("create", nlohmann::json::object()).body["session"].get<int64_t>();
+  const auto b = hub.handle("create", nlohmann::json::object()).body["session"].get<int64_t>();
+  sim::HubReply slow;
+  std::thread t([&] { slow = hub.handle("step", {{"session", a}, {"frame", true}}); });
+  while (!inside) std::this_thread::yield();
+  auto r = hub.handle("step", {{"session", a}});
+  EXPECT_EQ(r.status, 429);
+  EXPECT_NE(r.body["error"].get<std::string>().find("busy"), std::string::npos);
+  EXPECT_EQ(hub.handle("step", {{"session", b}}).status, 200);
+  gate.unlock();
+  t.join();
+  EXPECT_EQ(slow.status, 200);
+  EXPECT_EQ(hub.handle("step", {{"session", a}}).status, 200);
+}
