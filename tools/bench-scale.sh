@@ -42,7 +42,15 @@ for b in 2 4 8; do
   echo "default, batch $b: $("$GAIA" world train tokens --steps 3 --val-every 0 --set world.batch_size=$b --threads 2 \
     --out mem 2>&1 | grep -o 'the peak was.*beyond')"
 done
-python3 -c "import numpy as n; n.save('tiny.npy', n.random.RandomState(0).randint(0, 64, (160, 4, 8)))"
+python3 - <<'PY'  # random ids of a 4x8 grid, K = 64, as an int64 .npy (standard library only)
+import array, random
+random.seed(0)
+header = "{'descr': '<i8', 'fortran_order': False, 'shape': (160, 4, 8), }"
+header += " " * (118 - len(header)) + "\n"
+with open("tiny.npy", "wb") as f:
+    f.write(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode())
+    f.write(array.array("q", [random.randrange(64) for _ in range(160 * 4 * 8)]).tobytes())
+PY
 rm -rf mem
 echo "tiny, batch 4: $("$GAIA" world train tiny.npy --grid 4x8 --codebook-size 64 --config "$ROOT/configs/tiny.yaml" \
   --steps 3 --val-every 0 --threads 2 --out mem 2>&1 | grep -o 'the peak was.*beyond')"
