@@ -14,6 +14,7 @@ PKGS=(
   libyaml-cpp-dev              # configs
   nlohmann-json3-dev           # safetensors headers, JSONL metrics
   libpugixml-dev               # GPX tracks
+  libcpp-httplib-dev           # gaia sim serve (HTTP on loopback)
   libfmt-dev libspdlog-dev     # formatting and logging
   libgtest-dev libgmock-dev libbenchmark-dev
   liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)

@@ -2,12 +2,14 @@
 // on stdin, one JSON answer a line on stdout, for a policy in any language.
 #include <cstdio>
 #include <iostream>
+#include <mutex>
 
 #include <nlohmann/json.hpp>
 
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/sim/hub.h"
+#include "gaia/sim/server.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
 #include "gaia/world/token_dataset.h"
@@ -33,104 +35,147 @@ struct SimFlags {
 
 constexpr size_t kMaxLine = 1 << 20;  // bytes of one request
 
+// The flags both modes take.
+void add_sim_flags(CLI::App* cmd, SimFlags* g, SharedFlags* flags) {
+  cmd->add_option("TOKENS", g->tokens, "token dataset or file whose episodes are video prompts ({\"episode\": ID})");
+  add_token_format_flags(cmd, &g->format);
+  add_weights_flag(cmd, Weights::World, &g->world);
+  add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes frames to PNG for steps that ask ({\"frame\": true})");
+  cmd->add_option("--max-sessions", g->max_sessions, "sessions open at once")->check(number_in({1, 1024}));
+  cmd->add_option("--max-queue", g->max_queue, "requests that may wait while a session answers another")
+      ->check(number_in({0, 1024}));
+  cmd->add_option("--idle", g->idle_s, "seconds after which an untouched session is closed")->check(number_in({1, 1e7}));
+  add_shared_flags(cmd, flags, "unused");
+}
+
+// The world model, the prompts from TOKENS and the frame encoder (the tokenizer), then `serve` with the hub.
+void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<void(sim::SessionHub&)>& serve) {
+  Config run = resolve_config(flags);
+  apply_threads(run);
+  const auto dev = parse_device(run.run.device);
+  world::WorldInfo info;
+  auto model = world::load_world(g.world, dev, &info);
+  std::unique_ptr<world::TokenDataset> ds;
+  if (!g.tokens.empty()) {
+    ds = std::make_unique<world::TokenDataset>(g.tokens, token_format(g.format, run, false, &info));
+    if (ds->grid_h() != info.grid_h || ds->grid_w() != info.grid_w)
+      fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g.tokens, ds->grid_h(), ds->grid_w(), g.world,
+           info.grid_h, info.grid_w);
+  }
+  const int64_t n = info.n(), T = model->layout.T;
+  std::mutex ds_lock;  // the dataset's episode cache is not shared between threads
+  // {"episode": ID or index, "start": step, "frames": P}: P frames of TOKENS and their actions.
+  sim::PromptSource prompts;
+  if (ds)
+    prompts = [&, n, T](const nlohmann::json& q) {
+      for (const auto& [k, v] : q.items())
+        if (k != "episode" && k != "start" && k != "frames") fail("unknown field 'prompt.{}'", k);
+      if (!q.contains("episode") || !(q["episode"].is_string() || q["episode"].is_number_unsigned()))
+        fail("'prompt.episode' must be an episode id or index of the server's TOKENS");
+      std::lock_guard<std::mutex> g_(ds_lock);
+      const size_t e = ds->find(q["episode"].is_string() ? q["episode"].get<std::string>()
+                                                          : std::to_string(q["episode"].get<uint64_t>()));
+      auto whole = [&](const char* k, int64_t fallback, int64_t lo, int64_t hi) {
+        if (!q.contains(k)) return fallback;
+        if (!q[k].is_number_integer() || q[k].get<int64_t>() < lo || q[k].get<int64_t>() > hi)
+          fail("'prompt.{}' must be a whole number in [{}, {}]", k, lo, hi);
+        return q[k].get<int64_t>();
+      };
+      const int64_t steps = ds->steps(e), start = whole("start", 0, 0, steps - 1);
+      const int64_t P = std::min(whole("frames", std::min<int64_t>(T - 1, 4), 0, T - 1), steps - start);
+      auto ep = ds->episode(e);
+      sim::Prompt p;
+      p.tokens = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + start * n, {P, n}, torch::kInt)
+                     .to(torch::kLong);
+      p.actions = torch::from_blob(const_cast<float*>(ds->actions(e).data()) + start * 2, {P, 2}, torch::kFloat)
+                      .clone();
+      return p;
+    };
+  sim::FrameEncoder frames;
+#ifdef GAIA_NO_VIDEO
+  if (!g.tokenizer.empty()) fail("--tokenizer needs a build with video support (this one has none)");
+#else
+  tokenizer::ImageTokenizer tok{nullptr};
+  if (!g.tokenizer.empty()) {
+    tok = tokenizer::load_tokenizer(g.tokenizer, dev);
+    emerging::check_tokenizer_fits(info, g.world, tok, g.tokenizer);
+    frames = [&](const torch::Tensor& t) -> nlohmann::json {
+      auto img = tokenizer::decode_tokens(tok, t.view({1, info.grid_h, info.grid_w}), dev).at(0);
+      std::vector<uchar> png;
+      cv::imencode(".png", img, png);
+      return "data:image/png;base64," + report::base64_encode({reinterpret_cast<const char*>(png.data()), png.size()});
+    };
+  }
+#endif
+  sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s}, prompts, frames);
+  serve(hub);
+}
+
+// One JSON request a line on stdin, one JSON answer a line on stdout.
+void serve_stdio(sim::SessionHub& hub) {
+  std::string line;
+  int64_t number = 0;
+  while (std::getline(std::cin, line)) {
+    ++number;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    sim::HubReply reply;
+    if (line.size() > kMaxLine) {
+      reply = {413, {{"error", fmt::format("line {}: a request of {} bytes; at most {}", number, line.size(), kMaxLine)}}};
+    } else {
+      nlohmann::json req = nlohmann::json::parse(line, nullptr, false);
+      if (req.is_discarded() || !req.is_object())
+        reply = {400, {{"error", fmt::format("line {}: not a JSON object", number)}}};
+      else if (!req.contains("op") || !req["op"].is_string())
+        reply = {400, {{"error", fmt::format("line {}: no \"op\" (create, step, fork, reset, close, status)", number)}}};
+      else {
+        const auto op = req["op"].get<std::string>();
+        req.erase("op");
+        reply = hub.handle(op, req);
+      }
+    }
+    reply.body["status"] = reply.status;
+    std::fputs((reply.body.dump() + "\n").c_str(), stdout);
+    std::fflush(stdout);
+  }
+}
+
 }  // namespace
 
 void register_sim(CLI::App& app) {
   auto* cmd = app.add_subcommand("sim", "closed-loop driving in the world model: sessions stepped one action at a time "
-                                        "(--stdio: JSON lines on stdin/stdout, docs/sim.md)");
+                                        "(--stdio: JSON lines; serve: HTTP with a page to drive; docs/sim.md)");
   auto flags = std::make_shared<SharedFlags>();
   auto g = std::make_shared<SimFlags>();
-  cmd->add_option("TOKENS", g->tokens, "token dataset or file whose episodes are video prompts ({\"episode\": ID})");
-  add_token_format_flags(cmd, &g->format);
-  add_weights_flag(cmd, Weights::World, &g->world)->required();
-  add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes frames to PNG for steps that ask ({\"frame\": true})");
+  add_sim_flags(cmd, g.get(), flags.get());
   cmd->add_flag("--stdio", g->stdio, "read one JSON request a line from stdin, answer one JSON line on stdout");
-  cmd->add_option("--max-sessions", g->max_sessions, "sessions open at once")->check(number_in({1, 1024}));
-  cmd->add_option("--max-queue", g->max_queue, "requests that may wait for a busy session")->check(number_in({0, 1024}));
-  cmd->add_option("--idle", g->idle_s, "seconds after which an untouched session is closed")->check(number_in({1, 1e7}));
-  add_shared_flags(cmd, flags.get(), "unused");
-  cmd->callback([=] {
-    if (!g->stdio) fail("gaia sim: say --stdio (JSON requests on stdin, answers on stdout; docs/sim.md)");
-    Config run = resolve_config(*flags);
-    apply_threads(run);
-    const auto dev = parse_device(run.run.device);
-    world::WorldInfo info;
-    auto model = world::load_world(g->world, dev, &info);
-    std::unique_ptr<world::TokenDataset> ds;
-    if (!g->tokens.empty()) {
-      ds = std::make_unique<world::TokenDataset>(g->tokens, token_format(g->format, run, false, &info));
-      if (ds->grid_h() != info.grid_h || ds->grid_w() != info.grid_w)
-        fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g->tokens, ds->grid_h(), ds->grid_w(), g->world,
-             info.grid_h, info.grid_w);
-    }
-    const int64_t n = info.n(), T = model->layout.T;
-    // {"episode": ID or index, "start": step, "frames": P}: P frames of TOKENS and their actions.
-    sim::PromptSource prompts;
-    if (ds)
-      prompts = [&, n, T](const nlohmann::json& q) {
-        for (const auto& [k, v] : q.items())
-          if (k != "episode" && k != "start" && k != "frames") fail("unknown field 'prompt.{}'", k);
-        if (!q.contains("episode") || !(q["episode"].is_string() || q["episode"].is_number_unsigned()))
-          fail("'prompt.episode' must be an episode id or index of the server's TOKENS");
-        const size_t e = ds->find(q["episode"].is_string() ? q["episode"].get<std::string>()
-                                                            : std::to_string(q["episode"].get<uint64_t>()));
-        auto whole = [&](const char* k, int64_t fallback, int64_t lo, int64_t hi) {
-          if (!q.contains(k)) return fallback;
-          if (!q[k].is_number_integer() || q[k].get<int64_t>() < lo || q[k].get<int64_t>() > hi)
-            fail("'prompt.{}' must be a whole number in [{}, {}]", k, lo, hi);
-          return q[k].get<int64_t>();
-        };
-        const int64_t steps = ds->steps(e), start = whole("start", 0, 0, steps - 1);
-        const int64_t P = std::min(whole("frames", std::min<int64_t>(T - 1, 4), 0, T - 1), steps - start);
-        auto ep = ds->episode(e);
-        sim::Prompt p;
-        p.tokens = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + start * n, {P, n}, torch::kInt)
-                       .to(torch::kLong);
-        p.actions = torch::from_blob(const_cast<float*>(ds->actions(e).data()) + start * 2, {P, 2}, torch::kFloat)
-                        .clone();
-        return p;
-      };
-    sim::FrameEncoder frames;
-#ifdef GAIA_NO_VIDEO
-    if (!g->tokenizer.empty()) fail("--tokenizer needs a build with video support (this one has none)");
+  auto* serve = cmd->add_subcommand("serve", "answer the session protocol over HTTP on loopback, with a page at / to "
+                                             "drive from the browser");
+  auto sflags = std::make_shared<SharedFlags>();
+  auto sg = std::make_shared<SimFlags>();
+  add_sim_flags(serve, sg.get(), sflags.get());
+  auto so = std::make_shared<sim::ServerOptions>();
+  serve->add_option("--host", so->host, "address to listen on (default 127.0.0.1: this machine only)");
+  serve->add_option("--port", so->port, "port (0: any free one)")->check(number_in({0, 65535}));
+  serve->callback([=] {
+    if (sg->world.empty()) fail("gaia sim serve: --world is required");
+#ifndef GAIA_WITH_HTTP
+    fail("gaia sim serve: this build has no HTTP server (cpp-httplib was not found); use gaia sim --stdio, or "
+         "install libcpp-httplib-dev and rebuild");
 #else
-    tokenizer::ImageTokenizer tok{nullptr};
-    if (!g->tokenizer.empty()) {
-      tok = tokenizer::load_tokenizer(g->tokenizer, dev);
-      emerging::check_tokenizer_fits(info, g->world, tok, g->tokenizer);
-      frames = [&](const torch::Tensor& t) -> nlohmann::json {
-        auto img = tokenizer::decode_tokens(tok, t.view({1, info.grid_h, info.grid_w}), dev).at(0);
-        std::vector<uchar> png;
-        cv::imencode(".png", img, png);
-        return "data:image/png;base64," + report::base64_encode({reinterpret_cast<const char*>(png.data()), png.size()});
-      };
-    }
-#endif
-    sim::SessionHub hub(model, info, {g->max_sessions, g->max_queue, g->idle_s}, prompts, frames);
-    std::string line;
-    int64_t number = 0;
-    while (std::getline(std::cin, line)) {
-      ++number;
-      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-      sim::HubReply reply;
-      if (line.size() > kMaxLine) {
-        reply = {413, {{"error", fmt::format("line {}: a request of {} bytes; at most {}", number, line.size(), kMaxLine)}}};
-      } else {
-        nlohmann::json req = nlohmann::json::parse(line, nullptr, false);
-        if (req.is_discarded() || !req.is_object())
-          reply = {400, {{"error", fmt::format("line {}: not a JSON object", number)}}};
-        else if (!req.contains("op") || !req["op"].is_string())
-          reply = {400, {{"error", fmt::format("line {}: no \"op\" (create, step, fork, reset, close, status)", number)}}};
-        else {
-          const auto op = req["op"].get<std::string>();
-          req.erase("op");
-          reply = hub.handle(op, req);
-        }
-      }
-      reply.body["status"] = reply.status;
-      std::fputs((reply.body.dump() + "\n").c_str(), stdout);
+    with_hub(*sg, *sflags, [&](sim::SessionHub& hub) {
+      sim::SimServer server(hub, *so);
+      const int port = server.bind();
+      std::printf("gaia sim: serving on http://%s:%d/ (Ctrl-C stops)\n", so->host.c_str(), port);
       std::fflush(stdout);
-    }
+      server.run();
+    });
+#endif
+  });
+  cmd->callback([=] {
+    if (serve->parsed()) return;
+    if (!g->stdio) fail("gaia sim: say --stdio (JSON requests on stdin, answers on stdout) or serve (HTTP; docs/sim.md)");
+    if (g->world.empty()) fail("gaia sim: --world is required");
+    with_hub(*g, *flags, serve_stdio);
   });
 }
 

@@ -1,0 +1,51 @@
+#!/usr/bin/env python3
+"""docs/benchmarks.md, "Closed-loop sessions": per-step latency of `gaia sim serve` with the shipped world model,
+1, 2 and 4 sessions stepped at once (each by its own client), frames as tokens (no decoding).
+
+    tools/bench-sim.py [GAIA_BINARY] [STEPS]        (standard library only)
+"""
+import json, os, socket, statistics, subprocess, sys, threading, time, urllib.request
+
+root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+gaia = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "build", "gaia"))
+steps = int(sys.argv[2]) if len(sys.argv) > 2 else 20
+with socket.socket() as s:
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+server = subprocess.Popen([gaia, "sim", "serve", "--world", os.path.join(root, "models", "world.safetensors"),
+                           "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+server.stdout.readline()  # "serving on ..."
+
+
+def post(op, body):
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/api/{op}", json.dumps(body).encode(), method="POST")
+    with urllib.request.urlopen(req, timeout=600) as r:
+        return json.loads(r.read())
+
+
+try:
+    for sessions in (1, 2, 4):
+        times, lock = [], threading.Lock()
+
+        def drive(i):
+            sid = post("create", {"seed": i})["session"]
+            post("step", {"session": sid, "speed": 8, "curvature": 0})  # warm-up
+            for k in range(steps):
+                t0 = time.perf_counter()
+                post("step", {"session": sid, "speed": 8, "curvature": 0.01 if k % 2 else -0.01, "tokens": False})
+                with lock:
+                    times.append(1000 * (time.perf_counter() - t0))
+            post("close", {"session": sid})
+
+        t0 = time.perf_counter()
+        threads = [threading.Thread(target=drive, args=(i,)) for i in range(sessions)]
+        for t in threads: t.start()
+        for t in threads: t.join()
+        wall = time.perf_counter() - t0
+        times.sort()
+        p99 = times[min(len(times) - 1, int(0.99 * len(times)))]
+        print(f"{sessions} session(s): p50 {statistics.median(times):.0f} ms, p99 {p99:.0f} ms, "
+              f"{1000 / statistics.median(times):.2f} frames/s per session, {sessions * steps / wall:.2f} frames/s in all")
+finally:
+    server.terminate()
+    server.wait()
