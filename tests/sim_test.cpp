@@ -233,3 +233,27 @@ TEST(SimHub, ABusySessionRefusesRatherThanPilesUp) {
   EXPECT_EQ(slow.status, 200);
   EXPECT_EQ(hub.handle("step", {{"session", a}}).status, 200);
 }
+
+// The read-back (the dynamics probe in the app) sees each step's last `frames` frames, once there are that many.
+TEST(SimHub, EachStepReadsBackItsLastFrames) {
+  Fixture f;
+  sim::ReadBack rb;
+  rb.frames = 3;
+  rb.read = [](const torch::Tensor& recent) {
+    return nlohmann::json({{"frames", recent.size(0)}, {"sum", recent.sum().item<int64_t>()}});
+  };
+  sim::SessionHub hub(f.model, f.info, {}, {}, {}, rb);
+  auto id = hub.handle("create", {{"prompt", raw_prompt(2)}}).body["session"];
+  auto r = hub.handle("step", {{"session", id}, {"speed", 5}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  ASSERT_TRUE(r.body.contains("read_back")) << r.body.dump();  // 2 prompt frames + this one
+  auto tokens = r.body["tokens"].get<std::vector<int64_t>>();
+  int64_t sum = 0;
+  for (auto t : tokens) sum += t;
+  sum += kN * 3;  // the prompt's frames: all 0, then all 3
+  EXPECT_EQ(r.body["read_back"]["frames"], 3);
+  EXPECT_EQ(r.body["read_back"]["sum"], sum);
+  sim::SessionHub early(f.model, f.info, {}, {}, {}, rb);
+  id = early.handle("create", nlohmann::json::object()).body["session"];
+  EXPECT_FALSE(early.handle("step", {{"session", id}}).body.contains("read_back"));  // one frame so far
+}

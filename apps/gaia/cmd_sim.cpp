@@ -17,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "gaia/emerging/common.h"
+#include "gaia/probe/trainer.h"
 #include "gaia/report/report.h"
 #include "gaia/tokenizer/io.h"
 #endif
@@ -26,7 +27,7 @@ namespace gaia::app {
 namespace {
 
 struct SimFlags {
-  std::string tokens, world, tokenizer;
+  std::string tokens, world, tokenizer, probe;
   bool stdio = false;
   int max_sessions = 8, max_queue = 4;
   double idle_s = 600;
@@ -41,6 +42,9 @@ void add_sim_flags(CLI::App* cmd, SimFlags* g, SharedFlags* flags) {
   add_token_format_flags(cmd, &g->format);
   add_weights_flag(cmd, Weights::World, &g->world);
   add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes frames to PNG for steps that ask ({\"frame\": true})");
+  add_weights_flag(cmd, Weights::Probe, &g->probe,
+                   "dynamics probe: each step answers what its frames show (read_back: speed, curvature); needs "
+                   "--tokenizer");
   cmd->add_option("--max-sessions", g->max_sessions, "sessions open at once")->check(number_in({1, 1024}));
   cmd->add_option("--max-queue", g->max_queue, "requests that may wait while a session answers another")
       ->check(number_in({0, 1024}));
@@ -92,9 +96,13 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
       return p;
     };
   sim::FrameEncoder frames;
+  sim::ReadBack read_back;
 #ifdef GAIA_NO_VIDEO
-  if (!g.tokenizer.empty()) fail("--tokenizer needs a build with video support (this one has none)");
+  if (!g.tokenizer.empty() || !g.probe.empty())
+    fail("--tokenizer and --probe need a build with video support (this one has none)");
 #else
+  emerging::Models m;  // the read-back's models: the tokenizer's decoder and the dynamics probe
+  if (!g.probe.empty() && g.tokenizer.empty()) fail("--probe reads decoded frames: it needs --tokenizer");
   tokenizer::ImageTokenizer tok{nullptr};
   if (!g.tokenizer.empty()) {
     tok = tokenizer::load_tokenizer(g.tokenizer, dev);
@@ -106,8 +114,21 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
       return "data:image/png;base64," + report::base64_encode({reinterpret_cast<const char*>(png.data()), png.size()});
     };
   }
+  if (!g.probe.empty()) {
+    m.world = model;
+    m.info = info;
+    m.tok = tok;
+    m.dev = dev;
+    m.dynamics = probe::load_probe(g.probe, dev);
+    if (m.dynamics->kind != probe::ProbeKind::kDynamics) fail("{}: not a dynamics probe", g.probe);
+    read_back.frames = m.dynamics->frames;
+    read_back.read = [&](const torch::Tensor& recent) -> nlohmann::json {
+      auto y = emerging::read_dynamics(m, emerging::decode(m, recent.unsqueeze(0)).at(0));  // [1, 2]
+      return {{"speed", y[0][0].item<double>()}, {"curvature", y[0][1].item<double>()}};
+    };
+  }
 #endif
-  sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s}, prompts, frames);
+  sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s}, prompts, frames, read_back);
   serve(hub);
 }
 

@@ -87,8 +87,9 @@ struct Fields {
 }  // namespace
 
 SessionHub::SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits,
-                       PromptSource prompts, FrameEncoder frames)
-    : model_(model), info_(info), limits_(limits), prompts_(std::move(prompts)), frames_(std::move(frames)) {}
+                       PromptSource prompts, FrameEncoder frames, ReadBack read_back)
+    : model_(model), info_(info), limits_(limits), prompts_(std::move(prompts)), frames_(std::move(frames)),
+      read_back_(std::move(read_back)) {}
 
 size_t SessionHub::sessions() const {
   std::lock_guard<std::mutex> g(lock_);
@@ -201,6 +202,8 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
         json body{{"session", id}, {"step", e.session->steps() - 1}, {"text", e.session->text()}};
         if (want_tokens) body["tokens"] = std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel());
         if (want_frame) body["frame"] = frames_ ? frames_(tokens) : json(nullptr);
+        const int64_t K = read_back_.frames, steps = e.session->steps();
+        if (read_back_.read && K > 0 && steps >= K) body["read_back"] = read_back_.read(e.session->tokens().narrow(0, steps - K, K));
         body["ms"] = 1000 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         return HubReply{200, body};
       });

@@ -37,11 +37,17 @@ struct Prompt {
 };
 using PromptSource = std::function<Prompt(const nlohmann::json& prompt)>;
 using FrameEncoder = std::function<nlohmann::json(const torch::Tensor& tokens)>;
+// What the frames show, read back (the dynamics probe through the tokenizer's decoder): the last `frames` steps'
+// tokens [frames, n] -> {"speed": m/s, "curvature": 1/m}, added to each step's answer once there are that many.
+struct ReadBack {
+  int64_t frames = 0;
+  std::function<nlohmann::json(const torch::Tensor& recent)> read;
+};
 
 class SessionHub {
  public:
   SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits, PromptSource prompts,
-             FrameEncoder frames = {});
+             FrameEncoder frames = {}, ReadBack read_back = {});
   // op: create | step | fork | reset | close | status.
   HubReply handle(const std::string& op, const nlohmann::json& request);
   size_t sessions() const;
@@ -58,6 +64,7 @@ class SessionHub {
   HubLimits limits_;
   PromptSource prompts_;
   FrameEncoder frames_;
+  ReadBack read_back_;
   mutable std::mutex lock_;  // the map and the queue counts
   std::map<int64_t, std::shared_ptr<Entry>> sessions_;
   int64_t next_id_ = 1;

@@ -26,13 +26,14 @@ const std::string& driving_page() {
   <p>text prompt <input id="text" placeholder="e.g. night, heavy rain"> <button id="apply">apply</button></p>
   <p>prompt episode <input id="episode" placeholder="none: start from nothing" style="width:150px"></p>
   <p id="stats">starting&hellip;</p>
-  <div>commanded curvature (1/km, + = left)</div><canvas id="curv" width="360" height="110"></canvas>
-  <div>commanded speed (m/s)</div><canvas id="speed" width="360" height="110"></canvas>
+  <div>curvature (1/km, + = left): commanded, read back dashed</div><canvas id="curv" width="360" height="110"></canvas>
+  <div>speed (m/s): commanded, read back dashed</div><canvas id="speed" width="360" height="110"></canvas>
   <p id="error" class="err"></p>
  </div>
 </div>
 <script>
-const state = { session: null, speed: 8, steer: 0, running: true, text: null, curv: [], spd: [], times: [], step: 0 };
+const state = { session: null, speed: 8, steer: 0, running: true, text: null, curv: [], spd: [], rcurv: [], rspd: [],
+                times: [], step: 0 };
 const keys = {};
 // ?text=...&episode=...: the prompt; ?hold=ArrowLeft,Shift: keys held from the start; ?frames=N: stop after N frames
 // (a scripted drive: what the tests run in a headless browser).
@@ -48,17 +49,22 @@ async function api(op, body) {
   if (r.status !== 200) throw new Error(j.error || ('HTTP ' + r.status));
   return j;
 }
-function plot(id, values, lo, hi, color) {
+// Commanded (solid) and read back from the frames (dashed, null where the probe has not read yet).
+function plot(id, commanded, read, lo, hi, color) {
   const c = document.getElementById(id), g = c.getContext('2d');
   g.clearRect(0, 0, c.width, c.height);
-  g.strokeStyle = '#444'; g.beginPath();
+  g.strokeStyle = '#444'; g.setLineDash([]); g.beginPath();
   const y0 = c.height * hi / (hi - lo); g.moveTo(0, y0); g.lineTo(c.width, y0); g.stroke();
-  g.strokeStyle = color; g.beginPath();
-  values.forEach((v, i) => {
-    const x = c.width * i / 119, y = c.height * (hi - v) / (hi - lo);
-    i ? g.lineTo(x, y) : g.moveTo(x, y);
+  [[commanded, []], [read, [4, 3]]].forEach(([values, dash]) => {
+    g.strokeStyle = color; g.setLineDash(dash); g.beginPath();
+    let on = false;
+    values.forEach((v, i) => {
+      if (v === null) { on = false; return; }
+      const x = c.width * i / 119, y = c.height * (hi - Math.max(lo, Math.min(hi, v))) / (hi - lo);
+      on ? g.lineTo(x, y) : g.moveTo(x, y); on = true;
+    });
+    g.stroke();
   });
-  g.stroke();
 }
 async function start() {
   document.getElementById('error').textContent = '';
@@ -69,7 +75,8 @@ async function start() {
   const ep = document.getElementById('episode').value.trim();
   if (ep) req.prompt = { episode: /^[0-9]+$/.test(ep) ? Number(ep) : ep };
   const j = await api('create', req);
-  state.session = j.session; state.step = j.steps; state.curv = []; state.spd = []; state.times = [];
+  state.session = j.session; state.step = j.steps; state.curv = []; state.spd = []; state.rcurv = []; state.rspd = [];
+  state.times = [];
 }
 function command() {
   const hard = keys.Shift ? 3 : 1;
@@ -90,13 +97,16 @@ async function drive() {
       state.step = j.step;
       ++frames;
       state.curv.push(1000 * a.curvature); state.spd.push(a.speed); state.times.push(performance.now());
-      for (const k of ['curv', 'spd']) if (state[k].length > 120) state[k].shift();
+      const rb = j.read_back;
+      state.rcurv.push(rb ? 1000 * rb.curvature : null); state.rspd.push(rb ? rb.speed : null);
+      for (const k of ['curv', 'spd', 'rcurv', 'rspd']) if (state[k].length > 120) state[k].shift();
       if (state.times.length > 20) state.times.shift();
       const n = state.times.length, fps = n > 1 ? 1000 * (n - 1) / (state.times[n - 1] - state.times[0]) : 0;
       document.getElementById('stats').textContent =
         `step ${j.step}  ${fps.toFixed(2)} frames/s  ${j.ms.toFixed(0)} ms a step  speed ${a.speed.toFixed(1)} m/s` +
-        `  curvature ${(1000 * a.curvature).toFixed(0)} 1/km  text "${j.text}"`;
-      plot('curv', state.curv, -35, 35, '#6cf'); plot('speed', state.spd, 0, 30, '#fc6');
+        `  curvature ${(1000 * a.curvature).toFixed(0)} 1/km  text "${j.text}"` +
+        (rb ? `  read back: ${rb.speed.toFixed(1)} m/s, ${(1000 * rb.curvature).toFixed(1)} 1/km` : '');
+      plot('curv', state.curv, state.rcurv, -35, 35, '#6cf'); plot('speed', state.spd, state.rspd, 0, 30, '#fc6');
     } catch (e) {
       document.getElementById('error').textContent = e.message;
       await new Promise(r => setTimeout(r, 1000));

@@ -210,8 +210,9 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
   model->train();
   // The peak this run reaches above what it holds now (the weights, the data), against gaia plan's figure for the
-  // same settings: measured on a fresh run of the whole model without a teacher, which the plan describes.
-  const bool measure_memory = step == 0 && !teacher && opt.train_only.empty() && main;
+  // same settings: measured on a fresh run of the whole model without a teacher, which the plan describes, where
+  // the model lives in this process's memory (the CPU).
+  const bool measure_memory = step == 0 && !teacher && opt.train_only.empty() && main && dev.is_cpu();
   const double resident_at_start = sizing::resident_bytes();
   double peak_resident = 0;  // after each step until the first validation (whose batch differs)
   bool validated = false;
