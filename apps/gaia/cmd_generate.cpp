@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common.h"
+#include "episode_prompt.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
 #include "gaia/sizing/sizing.h"
@@ -132,11 +133,9 @@ void register_generate(CLI::App& app) {
       const size_t e = g->episode.empty() ? 0 : ds.find(g->episode);
       P = std::min<int64_t>(want_p, ds.steps(e) - g->start);
       if (P <= 0) fail("--start {} is past the end of episode {} ({} steps)", g->start, ds.ids()[e], ds.steps(e));
-      auto ep = ds.episode(e);
-      p.tokens = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + g->start * L.n, {P, L.n}, torch::kInt)
-                     .to(torch::kLong);
-      prompt_actions = torch::from_blob(const_cast<float*>(ds.actions(e).data()) + g->start * 2, {P, 2}, torch::kFloat)
-                           .clone();
+      auto ep = episode_prompt(ds, e, g->start, P);
+      p.tokens = ep.tokens;
+      prompt_actions = ep.actions;
       prompt_actions.select(1, 0).div_(world::kSpeedScale);
       prompt_actions.select(1, 1).div_(world::kCurvatureScale);
     }

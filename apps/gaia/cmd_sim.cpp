@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common.h"
+#include "episode_prompt.h"
 #include "gaia/core/error.h"
 #include "gaia/sim/hub.h"
 #include "gaia/sim/server.h"
@@ -66,12 +67,12 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
       fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g.tokens, ds->grid_h(), ds->grid_w(), g.world,
            info.grid_h, info.grid_w);
   }
-  const int64_t n = info.n(), T = model->layout.T;
+  const int64_t T = model->layout.T;
   std::mutex ds_lock;  // the dataset's episode cache is not shared between threads
   // {"episode": ID or index, "start": step, "frames": P}: P frames of TOKENS and their actions.
   sim::PromptSource prompts;
   if (ds)
-    prompts = [&, n, T](const nlohmann::json& q) {
+    prompts = [&, T](const nlohmann::json& q) {
       for (const auto& [k, v] : q.items())
         if (k != "episode" && k != "start" && k != "frames") fail("unknown field 'prompt.{}'", k);
       if (!q.contains("episode") || !(q["episode"].is_string() || q["episode"].is_number_unsigned()))
@@ -87,13 +88,8 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
       };
       const int64_t steps = ds->steps(e), start = whole("start", 0, 0, steps - 1);
       const int64_t P = std::min(whole("frames", std::min<int64_t>(T - 1, 4), 0, T - 1), steps - start);
-      auto ep = ds->episode(e);
-      sim::Prompt p;
-      p.tokens = torch::from_blob(const_cast<int32_t*>(ep->tokens.data()) + start * n, {P, n}, torch::kInt)
-                     .to(torch::kLong);
-      p.actions = torch::from_blob(const_cast<float*>(ds->actions(e).data()) + start * 2, {P, 2}, torch::kFloat)
-                      .clone();
-      return p;
+      auto ep = episode_prompt(*ds, e, start, P);
+      return sim::Prompt{ep.tokens, ep.actions};
     };
   sim::FrameEncoder frames;
   sim::ReadBack read_back;

@@ -193,7 +193,7 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
         Fields f{r};
         f.only({"session", "speed", "curvature", "text", "frame", "tokens"});
         const double nan = std::numeric_limits<double>::quiet_NaN();
-        Action a{f.number("speed", 0, 100, nan), f.number("curvature", -0.5, 0.5, nan)};
+        Action a{f.number("speed", 0, kMaxSpeed, nan), f.number("curvature", -kMaxCurvature, kMaxCurvature, nan)};
         std::optional<std::string> text;
         if (f.has("text")) text = f.text("text", "");
         const bool want_frame = f.flag("frame", false), want_tokens = f.flag("tokens", true);

@@ -77,9 +77,10 @@ void SimSession::reset() {
 void check_action(const Action& a) {
   for (double x : {a.speed, a.curvature})
     if (std::isinf(x)) fail("an action must be finite or NaN (no command), got {}", x);
-  if (!std::isnan(a.speed) && (a.speed < 0 || a.speed > 100)) fail("speed must be in [0, 100] m/s, got {}", a.speed);
-  if (!std::isnan(a.curvature) && std::abs(a.curvature) > 0.5)
-    fail("curvature must be in [-0.5, 0.5] 1/m, got {}", a.curvature);
+  if (!std::isnan(a.speed) && (a.speed < 0 || a.speed > kMaxSpeed))
+    fail("speed must be in [0, {}] m/s, got {}", kMaxSpeed, a.speed);
+  if (!std::isnan(a.curvature) && std::abs(a.curvature) > kMaxCurvature)
+    fail("curvature must be in [-{}, {}] 1/m, got {}", kMaxCurvature, kMaxCurvature, a.curvature);
 }
 
 void SimSession::append_row(const Action& a) {

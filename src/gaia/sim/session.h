@@ -33,7 +33,10 @@ struct Action {
   double curvature = std::numeric_limits<double>::quiet_NaN();  // 1/m, + = left
 };
 
-// Fails with one line naming the value unless speed is in [0, 100] m/s and curvature in [-0.5, 0.5] 1/m (NaN: none).
+inline constexpr double kMaxSpeed = 100;      // m/s
+inline constexpr double kMaxCurvature = 0.5;  // 1/m: a 2 m radius
+// Fails with one line naming the value unless speed is in [0, kMaxSpeed] and curvature in
+// [-kMaxCurvature, kMaxCurvature] (NaN: none).
 void check_action(const Action& a);
 
 class SimSession {
