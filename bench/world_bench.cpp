@@ -87,8 +87,11 @@ BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicro
 
 // `futures` x `frames` generated after a random prompt of T - 1 frames (the context is full for the first generated
 // frame), the window dropping `stride` steps when full. Counter: generated frames per second over all futures.
-static void run_rollouts(benchmark::State& st, int64_t frames, int64_t futures, int stride) {
+static void run_rollouts(benchmark::State& st, int64_t frames, int64_t futures, int stride, bool fast = true,
+                         int threads = 0) {
   Config c = bench_config();
+  const int before = at::get_num_threads();
+  if (threads > 0) set_torch_threads(threads);
   torch::manual_seed(0);
   WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
   RolloutPrompt p;
@@ -98,8 +101,10 @@ static void run_rollouts(benchmark::State& st, int64_t frames, int64_t futures, 
   o.frames = int(frames);
   o.futures = int(futures);
   o.window_stride = stride;
+  o.lookahead = o.fused_tokens = fast;
   for (auto _ : st) benchmark::DoNotOptimize(rollout(m, p, o).tokens);
   st.counters["frames/s"] = benchmark::Counter(double(frames * futures) * st.iterations(), benchmark::Counter::kIsRate);
+  set_torch_threads(before);
 }
 
 static void BM_RolloutCached(benchmark::State& st) { run_rollouts(st, st.range(0), 1, 1); }
@@ -109,6 +114,16 @@ BENCHMARK(BM_RolloutCached)->Arg(1)->Arg(8)->Unit(benchmark::kMillisecond)->UseR
 // 7-step history is re-encoded after every frame).
 static void BM_RolloutSliding(benchmark::State& st) { run_rollouts(st, 16, 1, int(st.range(0))); }
 BENCHMARK(BM_RolloutSliding)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// A closed-loop session's frame (sim/): one future, the paper's one-step slide, steady state. Arg 1: as gaia sim
+// runs it, one intra-op thread with the fused token step and the lookahead on a second thread; arg 0: the general
+// path at GAIA_BENCH_THREADS (the baseline).
+static void BM_SessionFrame(benchmark::State& st) {
+  const bool fast = st.range(0) == 1;
+  run_rollouts(st, 24, 1, 1, fast, fast ? 1 : 0);
+  st.SetLabel(fast ? "fused token step + lookahead, 1 intra-op thread" : "general path (baseline)");
+}
+BENCHMARK(BM_SessionFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
 // N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the
 // per-token dispatch cost is shared.

@@ -1,5 +1,6 @@
 // World model (§2.1, §2.3, §5.1): causality, loss placement, KV cache = full forward, sliding window, guidance,
 // sampling strategies, parameter count against the plan, and bad prompts.
+#include <optional>
 #include <set>
 
 #include <torch/torch.h>
@@ -13,6 +14,7 @@
 #include "gaia/world/model.h"
 #include "gaia/world/rollout.h"
 #include "gaia/world/sampling.h"
+#include "gaia/world/token_step.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -124,6 +126,91 @@ TEST(WorldModel, KvCacheMatchesFullForward) {
     g.push_back(m->logits(m->body(x.narrow(1, p, 1), &general)));
   }
   EXPECT_LT((torch::cat(a, 1) - torch::cat(g, 1)).abs().max().item<double>(), 1e-5);
+}
+
+// Weights large enough that attention and the MLPs are far from uniform (a new model's are near zero).
+static void sharpen(WorldModel& m, double by = 6.0) {
+  torch::NoGradGuard ng;
+  for (auto& p : m->parameters()) p.mul_(by);
+}
+
+// prefill() as the body with a cache: the same keys and values in every layer (the last block stops at them), from
+// a cache already holding a prefix; long appends attend block by block (transformer.cpp), checked against the
+// uncached causal forward.
+TEST(WorldModel, PrefillFillsTheCacheAsTheBodyDoes) {
+  Config c = tiny();
+  c.world.context_steps = 8;
+  torch::manual_seed(3);
+  WorldModel m(c.world, /*n=*/60, kK);  // 8 steps x 64 slots: 512 positions, appends past the query block
+  m->to(torch::Device(test::device_name()));
+  m->eval();
+  sharpen(m);
+  torch::NoGradGuard ng;
+  torch::manual_seed(4);
+  WorldBatch b;
+  b.tokens = torch::randint(0, kK, {2, 8, 60}, torch::kLong);
+  b.actions = torch::randn({2, 8, 2});
+  b = b.to(torch::Device(test::device_name()));
+  auto x = m->embed(b);  // [2, 512, d]
+  ASSERT_EQ(x.size(1), 512);
+  auto body = m->make_cache(2, 512), pre = m->make_cache(2, 512);
+  auto h0 = m->body(x.narrow(1, 0, 100), &body), h1 = m->body(x.narrow(1, 100, 412), &body);
+  m->prefill(x.narrow(1, 0, 100), pre);
+  m->prefill(x.narrow(1, 100, 412), pre);
+  EXPECT_EQ(pre.length, 512);
+  for (size_t l = 0; l < pre.k.size(); ++l) {
+    EXPECT_LT((pre.k[l] - body.k[l]).abs().max().item<double>(), 1e-5) << "keys, layer " << l;
+    EXPECT_LT((pre.v[l] - body.v[l]).abs().max().item<double>(), 1e-5) << "values, layer " << l;
+  }
+  auto full = m->body(x);  // no cache: one causal square
+  EXPECT_LT((torch::cat({h0, h1}, 1) - full).abs().max().item<double>(), 1e-4);
+  EXPECT_GT(full.std().item<double>(), 0.1);
+}
+
+// Sampling's fused per-token path against the general one (body, then logits), token by token on caches holding the
+// same prefix: the same logits and the same cache contents, for one row and for guidance's two.
+TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
+  Config c = tiny();
+  auto m = small_model(c, 5);
+  if (!m->token_embedding->weight.device().is_cpu()) GTEST_SKIP() << "the fused token step is the CPU's";
+  sharpen(m);
+  torch::NoGradGuard ng;
+  const TokenStep fast(*m);
+  EXPECT_TRUE(TokenStep::applies(*m, 2));
+  EXPECT_FALSE(TokenStep::applies(*m, 64));
+  for (int64_t B : {1, 2}) {
+    auto b = random_batch(c, B, 2);
+    auto x = m->embed(b);  // a prefix of two whole steps
+    auto general = m->make_cache(B, m->layout.length()), fused = m->make_cache(B, m->layout.length());
+    general.fused_single_token = false;
+    m->body(x, &general);
+    m->body(x, &fused);
+    torch::manual_seed(6);
+    double worst = 0, spread = 0, size = 0;  // the largest difference, relative to the largest logit
+    for (int64_t i = 0; i < kN; ++i) {  // step t = 2's image tokens
+      auto tok = torch::randint(0, kK, {B}, torch::kLong);
+      auto want = m->logits(m->body(m->embed_image(tok.view({B, 1, 1}), 2, i).view({B, 1, m->d}), &general).select(1, 0));
+      auto got = fast.logits(tok, 2, i, fused);
+      ASSERT_EQ(got.sizes(), want.sizes());
+      worst = std::max(worst, (got - want).abs().max().item<double>());
+      size = std::max(size, want.abs().max().item<double>());
+      spread = std::max(spread, want.std().item<double>());
+    }
+    EXPECT_LT(worst / size, 1e-5) << B << " rows, largest logit " << size;
+    EXPECT_GT(spread, 0.1);
+    EXPECT_EQ(fused.length, general.length);
+    for (size_t l = 0; l < fused.k.size(); ++l) {
+      auto n = fused.length;
+      auto gk = general.k[l].narrow(3, 0, n), gv = general.v[l].narrow(2, 0, n);
+      EXPECT_LT((fused.k[l].narrow(3, 0, n) - gk).abs().max().item<double>() / gk.abs().max().item<double>(), 1e-5);
+      EXPECT_LT((fused.v[l].narrow(2, 0, n) - gv).abs().max().item<double>() / gv.abs().max().item<double>(), 1e-5);
+    }
+  }
+  auto small = m->make_cache(1, 3);
+  small.length = 3;
+  EXPECT_THROW(fast.logits(torch::zeros({1}, torch::kLong), 0, 0, small), std::exception);  // full cache
+  auto roomy = m->make_cache(1, 8);
+  EXPECT_THROW(fast.logits(torch::full({1}, kK, torch::kLong), 0, 0, roomy), std::exception);  // id >= K
 }
 
 TEST(WorldModel, ParameterCountEqualsThePlan) {
@@ -294,8 +381,11 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
   p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+  const int threads = at::get_num_threads();
+  for (int one_thread : {0, 1})  // one intra-op thread: the next window is encoded ahead on a second thread
   for (double bias : {0.0, 1.5})
   for (int stride : {1, 2, int(T) - 1}) {
+  at::set_num_threads(one_thread ? 1 : threads);
   m->cfg.copy_bias = bias;  // the rollout adds world.copy_bias exactly where forward() does
   RolloutOptions o;
   o.frames = int(F);
@@ -314,13 +404,51 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
     b.actions = p.actions.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     b.text_ids = p.text_ids.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     auto want = m->forward(b).select(1, k - k0).argmax(-1);  // [1, n]
-    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k])) << "frame " << k << ", stride " << stride << ", bias " << bias;
+    EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k]))
+        << "frame " << k << ", stride " << stride << ", bias " << bias << ", one thread " << one_thread;
   }
   }
+  at::set_num_threads(threads);
   m->cfg.copy_bias = 0;
   RolloutOptions bad;
   bad.window_stride = int(T);
   EXPECT_NE(test::error_of([&] { rollout(m, p, bad); }).find("window stride"), std::string::npos);
+}
+
+// The lookahead (the next window's history encoded on a second thread) gives the plain path's tokens, and a copy
+// made while it runs (a fork) continues exactly as the original: top-k draws, past the window several times.
+TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
+  Config c = tiny();
+  auto m = small_model(c, 5);
+  sharpen(m, 3.0);
+  const int64_t T = c.world.context_steps, P = 2, F = 3 * T;
+  RolloutPrompt p;
+  torch::manual_seed(9);
+  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.actions = torch::randn({P + F, 2});
+  const int threads = at::get_num_threads();
+  at::set_num_threads(1);
+  auto run = [&](bool lookahead, int fork_at) {
+    RolloutOptions o;
+    o.seed = 4;
+    o.lookahead = lookahead;
+    RolloutStepper s(m, o, 1);
+    std::optional<RolloutStepper> copy;
+    for (int64_t k = 0; k < P; ++k) s.step(p, p.tokens[k]);
+    for (int64_t k = P; k < P + F; ++k) {
+      s.step(p);
+      if (k == fork_at) copy.emplace(s.fork());  // the lookahead job for the next step is in flight or just done
+    }
+    if (fork_at < 0) return s.tokens();
+    for (int64_t k = fork_at + 1; k < P + F; ++k) copy->step(p);
+    EXPECT_TRUE(torch::equal(copy->tokens(), s.tokens())) << "fork after step " << fork_at;
+    return copy->tokens();
+  };
+  auto plain = run(false, -1), ahead = run(true, -1);
+  EXPECT_TRUE(torch::equal(plain, ahead));
+  run(true, int(T + 2));
+  at::set_num_threads(threads);
+  EXPECT_GT(std::get<0>(at::_unique(ahead.narrow(1, P, F))).numel(), 4);  // it samples, it does not repeat one code
 }
 
 TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {

@@ -56,6 +56,10 @@ void add_sim_flags(CLI::App* cmd, SimFlags* g, SharedFlags* flags) {
 // The world model, the prompts from TOKENS and the frame encoder (the tokenizer), then `serve` with the hub.
 void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<void(sim::SessionHub&)>& serve) {
   Config run = resolve_config(flags);
+  // One intra-op thread per session unless told otherwise: a session's frame then samples on one core while the
+  // next window's history is encoded on another (world/rollout.h, lookahead), and sessions sharing the cores do not
+  // spin against each other.
+  if (flags.threads < 0 && run.run.threads == 0) run.run.threads = 1;
   apply_threads(run);
   const auto dev = parse_device(run.run.device);
   world::WorldInfo info;

@@ -133,6 +133,14 @@ torch::Tensor WorldModelImpl::body(const torch::Tensor& x, KVCache* cache) {
   return ln_f->forward(h);
 }
 
+void WorldModelImpl::prefill(const torch::Tensor& x, KVCache& cache) {
+  auto h = x;
+  const int last = int(blocks->size()) - 1;
+  for (int i = 0; i < last; ++i) h = (*blocks)[static_cast<size_t>(i)]->as<BlockImpl>()->forward(h, &cache, i);
+  (*blocks)[static_cast<size_t>(last)]->as<BlockImpl>()->append_kv(h, cache, last);
+  cache.length += x.size(1);
+}
+
 torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
   const int64_t B = b.batch(), T = b.steps(), n = layout.n;
   auto h = body(embed(b));  // [B, T * S, d]

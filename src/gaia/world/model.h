@@ -36,6 +36,9 @@ struct WorldModelImpl : torch::nn::Module {
   // Runs the body over embedded tokens appended to the cache (or without a cache, causally from scratch):
   // x [B, L, d] -> ln_f output [B, L, d]; the cache length grows by L.
   torch::Tensor body(const torch::Tensor& x, KVCache* cache = nullptr);
+  // As body with a cache, for tokens whose outputs are not needed (a prompt, actions, the re-encoded history of the
+  // sliding window): their keys and values are appended to the cache, and the last block stops there.
+  void prefill(const torch::Tensor& x, KVCache& cache);
   torch::Tensor logits(const torch::Tensor& h) { return head->forward(h); }  // [..., d] -> [..., K]
   KVCache make_cache(int64_t batch, int64_t capacity) const;
 

@@ -2,6 +2,8 @@
 
 #include <chrono>
 
+#include <ATen/Parallel.h>
+
 #include "gaia/core/error.h"
 #include "gaia/world/batch.h"
 
@@ -115,6 +117,7 @@ RolloutStepper::RolloutStepper(WorldModel& model, const RolloutOptions& o, int64
     fail("window stride must be in [1, T - 1 = {}] (got {})", model->layout.T - 1, o.window_stride);
   const int64_t B = guided_ ? 2 * N_ : N_;
   cache_ = model->make_cache(B, model->layout.length());
+  if (o.fused_tokens && TokenStep::applies(*model, B)) fast_ = std::make_shared<const TokenStep>(*model);
   tokens_ = torch::zeros({B, 8, model->layout.n}, torch::TensorOptions().dtype(torch::kLong).device(dev_));
 }
 
@@ -132,9 +135,20 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
   if (win_ == L.T) {
     // Sliding window: keep the last T - stride steps, re-embedded at temporal positions 0..T-stride-1.
     const int64_t first = k - (L.T - o_.window_stride);
-    cache_.reset();
-    auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first));
-    model_->body(model_->embed(hist, 0), &cache_);
+    if (ahead_.first == first && ahead_.job.valid()) {  // all but the newest step were encoded during the last one
+      auto tw = std::chrono::steady_clock::now();
+      ahead_.job.get();
+      if (getenv("GAIA_DEBUG_AHEAD")) fprintf(stderr, "waited %.1f ms\n", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tw).count());
+      std::swap(cache_, ahead_.cache);
+      cache_.length = (L.T - 2) * L.per_step();
+      model_->prefill(model_->embed(cond.at(k - 1, k, tokens_.narrow(1, k - 1, 1)), L.T - 2), cache_);
+    } else {
+      cache_.reset();
+      auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first));
+      model_->prefill(model_->embed(hist, 0), cache_);
+    }
+    ahead_.job = {};
+    ahead_.first = -1;
     win_ = L.T - o_.window_stride;
   }
   ++k_;
@@ -144,7 +158,7 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
     else if (g.size(0) == N_ && guided_) g = torch::cat({g, g});
     if (g.size(0) != B) fail("a prompt frame must be [n] or [futures = {}, n] tokens (got {} rows)", N_, g.size(0));
     tokens_.select(1, k).copy_(g);
-    model_->body(model_->embed(cond.at(k, k + 1, tokens_.narrow(1, k, 1)), win_), &cache_);
+    model_->prefill(model_->embed(cond.at(k, k + 1, tokens_.narrow(1, k, 1)), win_), cache_);
     ++win_;
     return tokens_.select(1, k).narrow(0, 0, N_);
   }
@@ -152,11 +166,26 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
                            p.negative_text_emb.defined();
   const bool within = guided_ && !text_guided && o_.sampling.guide_actions_within_top_k &&
                       o_.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
+  if (o_.lookahead && o_.window_stride == 1 && win_ == L.T - 1 && k >= L.T - 2 && dev_.is_cpu() && at::get_num_threads() == 1) {
+    // The next step slides: encode its history but this step (steps k - T + 2 .. k - 1) on a second thread now.
+    const int64_t first = k - (L.T - 2);
+    if (ahead_.cache.k.empty()) ahead_.cache = model_->make_cache(B, L.length());
+    auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first).clone());
+    auto model = model_;
+    auto cache = ahead_.cache;  // shares the tensors; the length is set when the result is taken
+    ahead_.first = first;
+    ahead_.job = std::async(std::launch::async, [model, hist, cache]() mutable {
+                   torch::NoGradGuard ng;
+                   cache.reset();
+                   model->prefill(model->embed(hist, 0), cache);
+                 }).share();
+  }
   auto sb = cond.at(k, k + 1, tokens_.narrow(1, k, 1));
   auto h = model_->body(model_->embed_text(sb, win_).view({B, L.m, d}), &cache_);
-  auto last = h.select(1, h.size(1) - 1);  // [B, d]
+  auto next = model_->logits(h.select(1, h.size(1) - 1));  // [B, K] predicting z_0
+  const bool fast = fast_ && TokenStep::applies(*model_, B);
   for (int64_t i = 0; i < n; ++i) {
-    auto lg = model_->logits(last).to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
+    auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
     if (k > 0 && model_->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
       lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);
     torch::Tensor tok;
@@ -170,16 +199,38 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       tok = sample_tokens(lg, o_.sampling, gen_);
     }
     tokens_.select(1, k).select(1, i).copy_(tok);
-    h = model_->body(model_->embed_image(tok.view({B, 1, 1}), win_, i).view({B, 1, d}), &cache_);
-    last = h.select(1, 0);
+    if (fast) {
+      next = fast_->logits(tok, win_, i, cache_);
+    } else {
+      h = model_->body(model_->embed_image(tok.view({B, 1, 1}), win_, i).view({B, 1, d}), &cache_);
+      if (i + 1 < n) next = model_->logits(h.select(1, 0));
+    }
   }
-  model_->body(model_->embed_actions(sb, win_).view({B, L.l, d}), &cache_);
+  model_->prefill(model_->embed_actions(sb, win_).view({B, L.l, d}), cache_);
   ++win_;
   ++generated_;
   return tokens_.select(1, k).narrow(0, 0, N_);
 }
 
 torch::Tensor RolloutStepper::tokens() const { return tokens_.narrow(0, 0, N_).narrow(1, 0, k_); }
+
+RolloutStepper::Lookahead::Lookahead(const Lookahead& o) : job(o.job), first(o.first) {
+  if (job.valid()) job.get();  // the job's error, if any, is the copy's too
+  cache = o.cache;
+  for (auto& t : cache.k) t = t.clone();
+  for (auto& t : cache.v) t = t.clone();
+  job = {};
+  if (o.job.valid()) {  // a finished job that the copy takes as its own
+    std::promise<void> done;
+    done.set_value();
+    job = done.get_future().share();
+  }
+}
+
+RolloutStepper::Lookahead& RolloutStepper::Lookahead::operator=(const Lookahead& o) {
+  if (this != &o) *this = Lookahead(o);
+  return *this;
+}
 
 RolloutStepper RolloutStepper::fork() const {
   RolloutStepper c(*this);

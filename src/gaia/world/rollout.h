@@ -3,12 +3,15 @@
 // per frame, with classifier-free guidance (conditional and unconditional rows in one batch) and a sliding window
 // for rollouts longer than the context (drop the oldest step, re-index the temporal positions).
 #include <functional>
+#include <future>
+#include <memory>
 
 #include <torch/torch.h>
 
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
 #include "gaia/world/sampling.h"
+#include "gaia/world/token_step.h"
 
 namespace gaia::world {
 
@@ -38,6 +41,12 @@ struct RolloutOptions {
   // re-encodes the whole kept history after every frame, because every kept step's temporal position changes;
   // stride S re-encodes once every S frames, and frames see T - S to T - 1 steps of history.
   int window_stride = 1;
+  // With stride 1 on the CPU at one intra-op thread: encode the next window's history on a second thread while a
+  // frame samples (RolloutStepper::Lookahead). The tokens are those of the plain path up to float rounding.
+  bool lookahead = true;
+  // Sampling's per-token path on raw memory (token_step.h) where it applies; false: the general LibTorch path (the
+  // reference of tests and benchmarks).
+  bool fused_tokens = true;
 };
 
 struct RolloutResult {
@@ -74,6 +83,21 @@ class RolloutStepper {
   torch::Device dev_;
   at::Generator gen_;
   KVCache cache_;
+  std::shared_ptr<const TokenStep> fast_;  // sampling's per-token path where it applies (shared by forks)
+  // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
+  // ahead: on the CPU with one intra-op thread, they are encoded on a second thread while the frame samples, and
+  // the next step adds only the newest. A copy of the stepper waits for the job and gets its own cache.
+  struct Lookahead {
+    std::shared_future<void> job;
+    KVCache cache;        // steps first .. first + T - 3 at temporal positions 0 .. T - 3 once the job is done
+    int64_t first = -1;   // -1: nothing ahead
+    Lookahead() = default;
+    Lookahead(Lookahead&&) = default;
+    Lookahead& operator=(Lookahead&&) = default;
+    Lookahead(const Lookahead& o);
+    Lookahead& operator=(const Lookahead& o);
+  };
+  Lookahead ahead_;
   torch::Tensor tokens_;  // [B, capacity, n], B = 2N with guidance (the unconditional rows copy the conditional)
   int64_t k_ = 0, generated_ = 0;
   int64_t win_ = 0;       // steps in the cache; the current step sits at temporal position `win_`

@@ -10,6 +10,7 @@
 #include <torch/version.h>
 
 #include "gaia/torch/attention.h"
+#include "gaia/torch/simd.h"
 
 namespace gaia::world {
 
@@ -23,45 +24,77 @@ CausalSelfAttentionImpl::CausalSelfAttentionImpl(int64_t d_, int64_t heads_) : h
 
 namespace {
 
+// Queries per block when many are appended to a cache on the CPU (filling it, as the sliding window does).
+constexpr int64_t kQueryBlock = 128;
+
 // q [B, H, Lq, hd], kT [B, H, hd, Lk] (keys transposed), v [B, H, Lk, hd]; query i sits at key position
 // offset + i and sees keys <= that.
 torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torch::Tensor& v, int64_t offset) {
   const int64_t Lq = q.size(2), Lk = kT.size(3);
   const auto k = kT.transpose(2, 3);
-  if (offset == 0 && Lq == Lk) return attention(q, k, v, {}, /*causal=*/true);
   if (Lq == 1) return attention(q, k, v);  // one query after the cached keys sees all of them
+  if (q.device().is_cpu() && Lq > 2 * kQueryBlock) {
+    // Block by block, each seeing only the keys up to its last query: the scores above the diagonal, about half
+    // of a square's, are mostly never computed.
+    std::vector<torch::Tensor> parts;
+    for (int64_t a = 0; a < Lq; a += kQueryBlock) {
+      const int64_t n = std::min(kQueryBlock, Lq - a), keys = offset + a + n;
+      parts.push_back(attention(q.narrow(2, a, n), k.narrow(2, 0, keys), v.narrow(2, 0, keys),
+                                causal_mask(n, keys, offset + a, q.options())));
+    }
+    return torch::cat(parts, 2);
+  }
+  if (offset == 0 && Lq == Lk) return attention(q, k, v, {}, /*causal=*/true);
   return attention(q, k, v, causal_mask(Lq, Lk, offset, q.options()));
 }
 
-// The two inner loops of one query's attention, compiled for AVX2 as well as the baseline x86-64 ISA where the
-// compiler supports function multiversioning (picked at load time; the build stays portable).
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
-#define GAIA_SIMD_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define GAIA_SIMD_CLONES
-#endif
+// The two inner loops of one query's attention (torch/simd.h: also compiled for AVX2).
+
+constexpr int64_t kLanes = 64;  // outputs kept in registers across a loop (eight AVX2 registers)
 
 // out[j] = scale * q . k_j for j < Lk, keys transposed (KT row e holds component e of every key, row stride `cap`):
-// a broadcast multiply-add per component over contiguous keys, which vectorises without horizontal sums.
+// 64 keys at a time are scored in registers, one broadcast multiply-add per component over contiguous keys (no
+// horizontal sums, so it vectorises without reordering float additions).
 GAIA_SIMD_CLONES void score_keys(const float* q, const float* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
                                  float* out) {
-  std::fill(out, out + Lk, 0.0f);
-  for (int64_t e = 0; e < hd; ++e) {
-    const float qe = q[e] * scale;
-    const float* row = KT + e * cap;
-    for (int64_t j = 0; j < Lk; ++j) out[j] += qe * row[j];
+  int64_t j0 = 0;
+  for (; j0 + kLanes <= Lk; j0 += kLanes) {
+    float acc[kLanes] = {};
+    for (int64_t e = 0; e < hd; ++e) {
+      const float qe = q[e] * scale;
+      const float* row = KT + e * cap + j0;
+      for (int64_t j = 0; j < kLanes; ++j) acc[j] += qe * row[j];
+    }
+    std::copy(acc, acc + kLanes, out + j0);
+  }
+  for (; j0 < Lk; ++j0) {
+    float a = 0;
+    for (int64_t e = 0; e < hd; ++e) a += q[e] * scale * KT[e * cap + j0];
+    out[j0] = a;
   }
 }
 
-// y = sum_j p[j] V[j] over Lk rows of hd floats.
+// y = sum_j p[j] V[j] over Lk rows of hd floats, 32 components at a time in registers.
 GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, int64_t hd, float* y) {
-  std::fill(y, y + hd, 0.0f);
-  for (int64_t j = 0; j < Lk; ++j) {
-    const float w = p[j];
-    const float* v = V + j * hd;
-    for (int64_t e = 0; e < hd; ++e) y[e] += w * v[e];
+  constexpr int64_t kE = 32;
+  int64_t e0 = 0;
+  for (; e0 + kE <= hd; e0 += kE) {
+    float acc[kE] = {};
+    for (int64_t j = 0; j < Lk; ++j) {
+      const float w = p[j];
+      const float* v = V + j * hd + e0;
+      for (int64_t e = 0; e < kE; ++e) acc[e] += w * v[e];
+    }
+    std::copy(acc, acc + kE, y + e0);
+  }
+  for (; e0 < hd; ++e0) {
+    float a = 0;
+    for (int64_t j = 0; j < Lk; ++j) a += p[j] * V[j * hd + e0];
+    y[e0] = a;
   }
 }
+
+}  // namespace
 
 // Sampling's case: one new token per row appended to a float32 CPU cache. The general path spends ~20 small
 // LibTorch operations per layer on views, cache writes and two batched products of a single query; here the cache
@@ -100,8 +133,6 @@ torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torc
   return out;
 }
 
-}  // namespace
-
 torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* cache, int layer) {
   const int64_t B = x.size(0), L = x.size(1), hd = d / heads;
   if (cache && cache->fused_single_token && L == 1 && x.device().is_cpu() && x.scalar_type() == torch::kFloat && !torch::GradMode::is_enabled()) {
@@ -131,6 +162,17 @@ torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* 
   }
   auto y = attend(q, kT, v, offset);  // [B, H, L, hd]
   return proj->forward(y.transpose(1, 2).reshape({B, L, d}));
+}
+
+void CausalSelfAttentionImpl::append_kv(const torch::Tensor& x, KVCache& cache, int layer) {
+  const int64_t B = x.size(0), L = x.size(1), hd = d / heads, offset = cache.length;
+  TORCH_CHECK(offset + L <= cache.capacity(), "KV cache overflow: ", offset, " + ", L, " > ", cache.capacity());
+  // The key and value rows of the qkv projection only (its first d outputs are the queries).
+  auto kv = F::linear(x, qkv->weight.narrow(0, d, 2 * d), qkv->bias.narrow(0, d, 2 * d))
+                .view({B, L, 2, heads, hd})
+                .permute({2, 0, 3, 1, 4});  // [2, B, H, L, hd]
+  cache.k[static_cast<size_t>(layer)].narrow(3, offset, L).copy_(kv[0].transpose(2, 3));
+  cache.v[static_cast<size_t>(layer)].narrow(2, offset, L).copy_(kv[1]);
 }
 
 BlockImpl::BlockImpl(int64_t d, int64_t heads) {

@@ -22,11 +22,20 @@ struct KVCache {
   void reset() { length = 0; }
 };
 
+// Sampling's case on raw memory: one new token per row, qkv [B, 3d] float32 (per row q | k | v, each H x hd), its
+// key and value written at `offset` of one layer's float32 CPU cache (K [B, H, hd, cap], V [B, H, cap, hd],
+// contiguous) -> [B, d], the token attending to the cache's first offset + 1 positions.
+torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
+                                int64_t heads);
+
 struct CausalSelfAttentionImpl : torch::nn::Module {
   CausalSelfAttentionImpl(int64_t d, int64_t heads);
   // x [B, L, d] -> [B, L, d]. Without a cache the L tokens attend causally among themselves. With a cache they
   // are appended after cache.length tokens and attend to all of those plus causally among themselves.
   torch::Tensor forward(const torch::Tensor& x, KVCache* cache = nullptr, int layer = 0);
+  // Only the keys and values of x [B, L, d], written to the cache after cache.length (what a layer's outputs are
+  // not needed for: the last layer when the cache is being filled).
+  void append_kv(const torch::Tensor& x, KVCache& cache, int layer);
   int64_t heads, d;
   torch::nn::Linear qkv{nullptr}, proj{nullptr};
 };
@@ -35,6 +44,7 @@ TORCH_MODULE(CausalSelfAttention);
 struct BlockImpl : torch::nn::Module {
   BlockImpl(int64_t d, int64_t heads);
   torch::Tensor forward(const torch::Tensor& x, KVCache* cache = nullptr, int layer = 0);  // [B, L, d] -> same
+  void append_kv(const torch::Tensor& x, KVCache& cache, int layer) { attn->append_kv(ln1->forward(x), cache, layer); }
   torch::nn::LayerNorm ln1{nullptr}, ln2{nullptr};
   CausalSelfAttention attn{nullptr};
   torch::nn::Linear fc{nullptr}, fc_proj{nullptr};
