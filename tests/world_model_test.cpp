@@ -419,12 +419,15 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
 // made while it runs (a fork) continues exactly as the original: top-k draws, past the window several times.
 TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
   Config c = tiny();
-  auto m = small_model(c, 5);
+  const int64_t n = 100;  // the newest step goes to the second thread in three chunks
+  torch::manual_seed(5);
+  WorldModel m(c.world, n, kK);
+  m->eval();
   sharpen(m, 3.0);
   const int64_t T = c.world.context_steps, P = 2, F = 3 * T;
   RolloutPrompt p;
   torch::manual_seed(9);
-  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.tokens = torch::randint(0, kK, {P, n}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   const int threads = at::get_num_threads();
   at::set_num_threads(1);

@@ -135,13 +135,10 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
   if (win_ == L.T) {
     // Sliding window: keep the last T - stride steps, re-embedded at temporal positions 0..T-stride-1.
     const int64_t first = k - (L.T - o_.window_stride);
-    if (ahead_.first == first && ahead_.job.valid()) {  // all but the newest step were encoded during the last one
-      auto tw = std::chrono::steady_clock::now();
+    if (ahead_.first == first && ahead_.job.valid()) {  // encoded on the second thread during the last step
       ahead_.job.get();
-      if (getenv("GAIA_DEBUG_AHEAD")) fprintf(stderr, "waited %.1f ms\n", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tw).count());
       std::swap(cache_, ahead_.cache);
-      cache_.length = (L.T - 2) * L.per_step();
-      model_->prefill(model_->embed(cond.at(k - 1, k, tokens_.narrow(1, k - 1, 1)), L.T - 2), cache_);
+      cache_.length = (L.T - 1) * L.per_step();
     } else {
       cache_.reset();
       auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first));
@@ -166,20 +163,49 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
                            p.negative_text_emb.defined();
   const bool within = guided_ && !text_guided && o_.sampling.guide_actions_within_top_k &&
                       o_.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
-  if (o_.lookahead && o_.window_stride == 1 && win_ == L.T - 1 && k >= L.T - 2 && dev_.is_cpu() && at::get_num_threads() == 1) {
-    // The next step slides: encode its history but this step (steps k - T + 2 .. k - 1) on a second thread now.
-    const int64_t first = k - (L.T - 2);
+  std::shared_ptr<Lookahead::Progress> progress;
+  if (o_.lookahead && o_.window_stride == 1 && win_ == L.T - 1 && k >= L.T - 2 && dev_.is_cpu() &&
+      at::get_num_threads() == 1) {
+    // The next step slides: encode its history on a second thread now, steps k - T + 2 .. k - 1 at once, then this
+    // step's tokens in fixed chunks as they are sampled (fixed, so that the numbers never depend on timing).
+    const int64_t first = k - (L.T - 2), t = L.T - 2;
     if (ahead_.cache.k.empty()) ahead_.cache = model_->make_cache(B, L.length());
     auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first).clone());
+    auto now = cond.at(k, k + 1, tokens_.narrow(1, k, 1).clone());  // its text and actions (tokens: filled below)
+    for (auto* f : {&now.actions, &now.text_ids, &now.text_emb, &now.use_action, &now.use_text})
+      if (f->defined()) *f = f->clone();
+    if (ahead_.job.valid()) ahead_.job.wait();  // an abandoned job may still hold the cache
+    progress = std::make_shared<Lookahead::Progress>(n);
     auto model = model_;
     auto cache = ahead_.cache;  // shares the tensors; the length is set when the result is taken
+    auto row = tokens_.select(1, k);  // [B, n], written token by token by this thread
     ahead_.first = first;
-    ahead_.job = std::async(std::launch::async, [model, hist, cache]() mutable {
+    ahead_.job = std::async(std::launch::async, [model, hist, now, cache, row, progress, t, n, B, d]() mutable {
                    torch::NoGradGuard ng;
                    cache.reset();
                    model->prefill(model->embed(hist, 0), cache);
+                   for (int64_t a = 0; a < n; a += Lookahead::kChunk) {
+                     const int64_t b = std::min(n, a + Lookahead::kChunk);
+                     if (!progress->wait_for(b)) return;  // the step failed: the result is not taken
+                     std::vector<torch::Tensor> parts;
+                     if (a == 0) parts.push_back(model->embed_text(now, t));
+                     parts.push_back(model->embed_image(row.narrow(1, a, b - a).clone().unsqueeze(1), t, a));
+                     if (b == n) parts.push_back(model->embed_actions(now, t));
+                     model->prefill(torch::cat(parts, 2).view({B, -1, d}), cache);
+                   }
                  }).share();
   }
+  // Until every token is out, a failure leaves the lookahead unused (and its job released).
+  struct Release {
+    std::shared_ptr<Lookahead::Progress> p;
+    Lookahead& ahead;
+    ~Release() {
+      if (p && !p->done()) {
+        p->abandon();
+        ahead.first = -1;
+      }
+    }
+  } release{progress, ahead_};
   auto sb = cond.at(k, k + 1, tokens_.narrow(1, k, 1));
   auto h = model_->body(model_->embed_text(sb, win_).view({B, L.m, d}), &cache_);
   auto next = model_->logits(h.select(1, h.size(1) - 1));  // [B, K] predicting z_0
@@ -199,6 +225,7 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       tok = sample_tokens(lg, o_.sampling, gen_);
     }
     tokens_.select(1, k).select(1, i).copy_(tok);
+    if (progress && ((i + 1) % Lookahead::kChunk == 0 || i + 1 == n)) progress->release(i + 1);
     if (fast) {
       next = fast_->logits(tok, win_, i, cache_);
     } else {
@@ -213,6 +240,33 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
 }
 
 torch::Tensor RolloutStepper::tokens() const { return tokens_.narrow(0, 0, N_).narrow(1, 0, k_); }
+
+bool RolloutStepper::Lookahead::Progress::wait_for(int64_t tokens) {
+  std::unique_lock<std::mutex> lock(m);
+  cv.wait(lock, [&] { return sampled >= tokens || abandoned; });
+  return !abandoned;
+}
+
+void RolloutStepper::Lookahead::Progress::release(int64_t tokens) {
+  {
+    std::lock_guard<std::mutex> lock(m);
+    sampled = tokens;
+  }
+  cv.notify_all();
+}
+
+void RolloutStepper::Lookahead::Progress::abandon() {
+  {
+    std::lock_guard<std::mutex> lock(m);
+    abandoned = true;
+  }
+  cv.notify_all();
+}
+
+bool RolloutStepper::Lookahead::Progress::done() {
+  std::lock_guard<std::mutex> lock(m);
+  return sampled >= total;
+}
 
 RolloutStepper::Lookahead::Lookahead(const Lookahead& o) : job(o.job), first(o.first) {
   if (job.valid()) job.get();  // the job's error, if any, is the copy's too

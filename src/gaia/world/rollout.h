@@ -2,9 +2,11 @@
 // Rolling out futures (§2.3, §5.1): KV-cached incremental decoding of image tokens frame by frame, n forward steps
 // per frame, with classifier-free guidance (conditional and unconditional rows in one batch) and a sliding window
 // for rollouts longer than the context (drop the oldest step, re-index the temporal positions).
+#include <condition_variable>
 #include <functional>
 #include <future>
 #include <memory>
+#include <mutex>
 
 #include <torch/torch.h>
 
@@ -85,11 +87,24 @@ class RolloutStepper {
   KVCache cache_;
   std::shared_ptr<const TokenStep> fast_;  // sampling's per-token path where it applies (shared by forks)
   // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
-  // ahead: on the CPU with one intra-op thread, they are encoded on a second thread while the frame samples, and
-  // the next step adds only the newest. A copy of the stepper waits for the job and gets its own cache.
+  // ahead and the newest comes token by token: on the CPU with one intra-op thread, a second thread encodes the
+  // next window while the frame samples. A copy of the stepper waits for the job and gets its own cache.
   struct Lookahead {
+    static constexpr int64_t kChunk = 48;  // image tokens of the newest step encoded at once
+    // How many of the newest step's tokens are out: the job waits for each chunk.
+    struct Progress {
+      explicit Progress(int64_t n) : total(n) {}
+      bool wait_for(int64_t tokens);  // false: abandoned
+      void release(int64_t tokens);
+      void abandon();
+      bool done();
+      std::mutex m;
+      std::condition_variable cv;
+      int64_t sampled = 0, total;
+      bool abandoned = false;
+    };
     std::shared_future<void> job;
-    KVCache cache;        // steps first .. first + T - 3 at temporal positions 0 .. T - 3 once the job is done
+    KVCache cache;        // steps first .. first + T - 2 at temporal positions 0 .. T - 2 once the job is done
     int64_t first = -1;   // -1: nothing ahead
     Lookahead() = default;
     Lookahead(Lookahead&&) = default;
