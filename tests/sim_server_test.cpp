@@ -3,6 +3,7 @@
 // in a real headless browser (a scripted drive holding the left arrow).
 #ifdef GAIA_WITH_HTTP
 #include <atomic>
+#include <algorithm>
 #include <thread>
 
 #include <httplib.h>
@@ -111,6 +112,66 @@ TEST(SimServer, ProtocolOverHttpAndBadRequestsAre4xx) {
 
 // N clients x M steps on their own sessions, all answered, twice: the second round holds no more memory than the
 // first; a client that sends half a request and vanishes leaves the others served.
+// The stream: server-sent events, one per step of the standing command, changed while it runs; a stream left early
+// leaves the session to the next one; bad streams are plain 4xx.
+TEST(SimServer, TheStreamSendsAStepPerEventWithTheStandingCommand) {
+  Served s;
+  auto c = s.client();
+  const auto id = post(c, "create", R"({"seed": 5})").second["session"].get<int64_t>();
+  ASSERT_EQ(post(c, "command", json({{"session", id}, {"speed", 9}, {"curvature", 0.01}}).dump()).first, 200);
+  std::string events;
+  int seen = 0;
+  auto other = s.client();
+  auto r = c.Get(("/api/stream?session=" + std::to_string(id) + "&frames=5&frame=1").c_str(),
+                 [&](const char* data, size_t len) {
+                   events.append(data, len);
+                   const int now = int(std::count(events.begin(), events.end(), '\n')) / 2;
+                   if (now >= 2 && seen < 2)  // mid-stream, from another connection: turn right from here
+                     post(other, "command", json({{"session", id}, {"speed", 9}, {"curvature", -0.01}}).dump());
+                   seen = now;
+                   return true;
+                 });
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
+  EXPECT_NE(r->get_header_value("Content-Type").find("text/event-stream"), std::string::npos);
+  std::vector<json> got;
+  for (size_t at = 0; (at = events.find("data: ", at)) != std::string::npos; at += 6)
+    got.push_back(json::parse(events.substr(at + 6, events.find('\n', at) - at - 6)));
+  ASSERT_EQ(got.size(), 5u) << events;
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k]["step"], int64_t(k));
+    EXPECT_EQ(got[k]["frame"].get<std::string>().rfind("data:image/png", 0), 0u);
+  }
+  // The change lands wherever the stream has got to (the server does not wait for the reader), and holds from there.
+  EXPECT_EQ(got.front()["command"]["curvature"], 0.01);
+  bool turned = false;
+  for (const auto& g : got) {
+    turned = turned || g["command"]["curvature"] == -0.01;
+    EXPECT_EQ(g["command"]["curvature"], turned ? -0.01 : 0.01);
+  }
+  std::string next;
+  c.Get(("/api/stream?session=" + std::to_string(id) + "&frames=1").c_str(), [&](const char* data, size_t len) {
+    next.append(data, len);
+    return true;
+  });
+  EXPECT_NE(next.find(R"("curvature":-0.01)"), std::string::npos) << next;
+  // Left after one event: the session goes on serving the next stream and plain steps.
+  int n = 0;
+  c.Get(("/api/stream?session=" + std::to_string(id)).c_str(), [&](const char*, size_t) { return ++n < 1; });
+  auto [status, body] = post(c, "step", json({{"session", id}}).dump());
+  EXPECT_EQ(status, 200) << body.dump();
+  EXPECT_GE(body["step"].get<int64_t>(), 7);
+  for (const auto& [query, words] : std::vector<std::pair<std::string, std::string>>{
+           {"session=99", "no session 99"}, {"", "'session'"}, {"session=x", "whole number"},
+           {"session=1&speed=3", "unknown parameter 'speed'"}, {"session=1&frame=yes", "'frame' must be 1 or 0"}}) {
+    auto bad = c.Get(("/api/stream?" + query).c_str());
+    ASSERT_TRUE(bad);
+    EXPECT_GE(bad->status, 400) << query;
+    EXPECT_LT(bad->status, 500) << query;
+    EXPECT_NE(bad->body.find(words), std::string::npos) << query << ": " << bad->body;
+  }
+}
+
 TEST(SimServer, ABoundedLoadIsAnsweredAndAVanishedClientHarmsNoOne) {
   Served s;
   constexpr int kClients = 4, kSteps = 12;

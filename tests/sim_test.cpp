@@ -184,7 +184,7 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
       {"step", {{"session", id}, {"steer", 1}}, 400, "unknown field 'steer'"},
       {"step", {{"session", 99}}, 404, "no session 99"},
       {"step", {{"speed", 8}}, 400, "'session'"},
-      {"drive", nlohmann::json::object(), 404, "unknown request 'drive'"},
+      {"fly", nlohmann::json::object(), 404, "unknown request 'fly'"},
       {"create", {{"prompt", {{"tokens", {{1, 2}}}}}}, 400, "'prompt.tokens[0]' must be a list of 6 ids"},
       {"create", {{"prompt", {{"episode", "a"}}}}, 400, "no token dataset"},
       {"create", {{"guidance", -1}}, 400, "'guidance' must be in [0, 100]"},
@@ -209,6 +209,40 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
 
 // A session answers one request at a time: while one waits in it (a slow frame encoder), another to the same
 // session is refused at once with max_queue 0, and one to another session is answered.
+// Continuous driving: "command" sets a session's standing action (and a text that applies once), "drive" steps
+// with it, giving the tokens "step" gives with the same action; bad commands are 4xx and change nothing.
+TEST(SimHub, DriveStepsWithTheStandingCommand) {
+  Fixture f;
+  sim::SessionHub hub(f.model, f.info, {4, 0, 600}, {});
+  const auto a = hub.handle("create", {{"prompt", raw_prompt(2)}, {"seed", 3}}).body["session"].get<int64_t>();
+  const auto b = hub.handle("create", {{"prompt", raw_prompt(2)}, {"seed", 3}}).body["session"].get<int64_t>();
+  auto r = hub.handle("command", {{"session", a}, {"speed", 6}, {"curvature", -0.02}, {"text", "fog"}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  EXPECT_EQ(r.body["command"]["curvature"], -0.02);
+  for (int k = 0; k < 3; ++k) {
+    auto d = hub.handle("drive", {{"session", a}});
+    nlohmann::json step{{"session", b}, {"speed", 6}, {"curvature", -0.02}};
+    if (k == 0) step["text"] = "fog";
+    auto s = hub.handle("step", step);
+    ASSERT_EQ(d.status, 200) << d.body.dump();
+    EXPECT_EQ(d.body["tokens"], s.body["tokens"]) << "step " << k;
+    EXPECT_EQ(d.body["text"], "fog");
+    EXPECT_EQ(d.body["command"]["speed"], 6.0);
+  }
+  const std::vector<std::tuple<std::string, nlohmann::json, int, std::string>> bad = {
+      {"command", {{"session", a}, {"curvature", 0.9}}, 400, "'curvature' must be in [-0.5, 0.5]"},
+      {"command", {{"session", a}, {"speed", nullptr}, {"yaw", 1}}, 400, "unknown field 'yaw'"},
+      {"command", {{"session", 77}, {"speed", 1}}, 404, "no session 77"},
+      {"drive", {{"session", a}, {"speed", 3}}, 400, "unknown field 'speed'"},
+  };
+  for (const auto& [op, req, status, words] : bad) {
+    r = hub.handle(op, req);
+    EXPECT_EQ(r.status, status) << op << " " << req.dump() << ": " << r.body.dump();
+    EXPECT_NE(r.body["error"].get<std::string>().find(words), std::string::npos) << r.body.dump();
+  }
+  EXPECT_EQ(hub.handle("drive", {{"session", a}}).body["command"]["curvature"], -0.02);  // unchanged by the refusals
+}
+
 TEST(SimHub, ABusySessionRefusesRatherThanPilesUp) {
   Fixture f;
   std::mutex gate;

@@ -1,34 +1,48 @@
 #!/usr/bin/env python3
 """docs/benchmarks.md, "Closed-loop sessions": per-step latency of `gaia sim serve` with the shipped world model,
-1, 2 and 4 sessions stepped at once (each by its own client), frames as tokens (no decoding).
+1, 2 and 4 sessions stepped at once (each by its own client) from a full context, so that every step slides the
+window (§2.3), frames as tokens (no decoding). Each server setting
+named on the command line runs in turn (default: gaia sim's own, then `--threads 2`).
 
-    tools/bench-sim.py [GAIA_BINARY] [STEPS]        (standard library only)
+    tools/bench-sim.py [GAIA_BINARY] [STEPS] [SERVER FLAGS | -]...      (standard library only)
 """
-import json, os, socket, statistics, subprocess, sys, threading, time, urllib.request
+import json, os, random, socket, statistics, subprocess, sys, threading, time, urllib.request
 
 root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 gaia = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "build", "gaia"))
 steps = int(sys.argv[2]) if len(sys.argv) > 2 else 20
-with socket.socket() as s:
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-server = subprocess.Popen([gaia, "sim", "serve", "--world", os.path.join(root, "models", "world.safetensors"),
-                           "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-server.stdout.readline()  # "serving on ..."
+settings = sys.argv[3:] or ["-", "--threads 2"]
 
 
 def post(op, body):
-    req = urllib.request.Request(f"http://127.0.0.1:{port}/api/{op}", json.dumps(body).encode(), method="POST")
+    req = urllib.request.Request(url + op, json.dumps(body).encode(), method="POST")
     with urllib.request.urlopen(req, timeout=600) as r:
         return json.loads(r.read())
 
 
-try:
+def run(flags):
+  with socket.socket() as s:
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+  global url
+  url = f"http://127.0.0.1:{port}/api/"
+  extra = [] if flags == "-" else flags.split()
+  server = subprocess.Popen([gaia, "sim", "serve", "--world", os.path.join(root, "models", "world.safetensors"),
+                             "--port", str(port)] + extra, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+  server.stdout.readline()  # "serving on ..."
+  print(f"server flags: {flags if extra else '(gaia sim defaults)'}")
+  try:
+    # Sessions start from a full context (7 random prompt frames), so that every step measured slides the window.
+    probe = post("create", {})["session"]
+    n = len(post("step", {"session": probe})["tokens"])
+    post("close", {"session": probe})
+    rng = random.Random(0)
+    prompt = {"tokens": [[rng.randrange(1024) for _ in range(n)] for _ in range(7)], "actions": [[8, 0]] * 7}
     for sessions in (1, 2, 4):
         times, lock = [], threading.Lock()
 
         def drive(i):
-            sid = post("create", {"seed": i})["session"]
+            sid = post("create", {"seed": i, "prompt": prompt})["session"]
             post("step", {"session": sid, "speed": 8, "curvature": 0})  # warm-up
             for k in range(steps):
                 t0 = time.perf_counter()
@@ -46,6 +60,10 @@ try:
         p99 = times[min(len(times) - 1, int(0.99 * len(times)))]
         print(f"{sessions} session(s): p50 {statistics.median(times):.0f} ms, p99 {p99:.0f} ms, "
               f"{1000 / statistics.median(times):.2f} frames/s per session, {sessions * steps / wall:.2f} frames/s in all")
-finally:
+  finally:
     server.terminate()
     server.wait()
+
+
+for flags in settings:
+    run(flags)

@@ -188,18 +188,28 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
         list.push_back({{"session", id}, {"idle_s", std::chrono::duration<double>(now - e->used).count()}});
       return {200, json{{"sessions", list}, {"max_sessions", limits_.max_sessions}}};
     }
-    if (op == "step")
+    if (op == "step" || op == "drive")
       return with_session(r, [&](Entry& e, int64_t id) {
         Fields f{r};
-        f.only({"session", "speed", "curvature", "text", "frame", "tokens"});
-        const double nan = std::numeric_limits<double>::quiet_NaN();
-        Action a{f.number("speed", 0, kMaxSpeed, nan), f.number("curvature", -kMaxCurvature, kMaxCurvature, nan)};
+        Action a;
         std::optional<std::string> text;
-        if (f.has("text")) text = f.text("text", "");
+        if (op == "step") {
+          f.only({"session", "speed", "curvature", "text", "frame", "tokens"});
+          const double nan = std::numeric_limits<double>::quiet_NaN();
+          a = {f.number("speed", 0, kMaxSpeed, nan), f.number("curvature", -kMaxCurvature, kMaxCurvature, nan)};
+          if (f.has("text")) text = f.text("text", "");
+        } else {  // the session's standing command (op "command"); a new text applies once
+          f.only({"session", "frame", "tokens"});
+          std::lock_guard<std::mutex> g(lock_);
+          a = e.command;
+          text = std::move(e.command_text);
+          e.command_text.reset();
+        }
         const bool want_frame = f.flag("frame", false), want_tokens = f.flag("tokens", true);
         const auto t0 = std::chrono::steady_clock::now();
         auto tokens = e.session->step(a, text);
         json body{{"session", id}, {"step", e.session->steps() - 1}, {"text", e.session->text()}};
+        if (op == "drive") body["command"] = {{"speed", a.speed}, {"curvature", a.curvature}};
         if (want_tokens) body["tokens"] = std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel());
         if (want_frame) body["frame"] = frames_ ? frames_(tokens) : json(nullptr);
         const int64_t K = read_back_.frames, steps = e.session->steps();
@@ -207,6 +217,23 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
         body["ms"] = 1000 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         return HubReply{200, body};
       });
+    if (op == "command") {  // answered at once, even while the session steps: the next "drive" step takes it
+      Fields f{r};
+      f.only({"session", "speed", "curvature", "text"});
+      if (!r.contains("session") || !r.at("session").is_number_integer()) fail("'session' must be the id create returned");
+      const auto id = r.at("session").get<int64_t>();
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      const Action a{f.number("speed", 0, kMaxSpeed, nan), f.number("curvature", -kMaxCurvature, kMaxCurvature, nan)};
+      std::optional<std::string> text;
+      if (f.has("text")) text = f.text("text", "");
+      std::lock_guard<std::mutex> g(lock_);
+      auto it = sessions_.find(id);
+      if (it == sessions_.end()) return error(404, fmt::format("no session {} (closed, expired or never created)", id));
+      it->second->command = a;
+      if (text) it->second->command_text = text;
+      it->second->used = std::chrono::steady_clock::now();
+      return {200, json{{"session", id}, {"command", {{"speed", a.speed}, {"curvature", a.curvature}}}}};
+    }
     if (op == "fork") {
       std::unique_ptr<SimSession> copy;
       auto r1 = with_session(r, [&](Entry& e, int64_t) {
@@ -232,7 +259,7 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
       }
       return reply;
     }
-    return error(404, fmt::format("unknown request '{}' (create, step, fork, reset, close, status)", op));
+    return error(404, fmt::format("unknown request '{}' (create, step, command, drive, fork, reset, close, status)", op));
   } catch (const std::exception& e) {
     std::string m = e.what();
     return error(400, m.substr(0, m.find('\n')));

@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -48,7 +49,8 @@ class SessionHub {
  public:
   SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits, PromptSource prompts,
              FrameEncoder frames = {}, ReadBack read_back = {});
-  // op: create | step | fork | reset | close | status.
+  // op: create | step | command | drive | fork | reset | close | status. "command" sets a session's standing action
+  // (answered at once, even while it steps) and "drive" steps it with that: continuous driving, as the stream does.
   HubReply handle(const std::string& op, const nlohmann::json& request);
   size_t sessions() const;
 
@@ -58,6 +60,8 @@ class SessionHub {
     std::mutex busy;          // one request at a time
     int pending = 0;          // requests being answered or waiting for `busy` (under the hub's lock)
     std::chrono::steady_clock::time_point used;
+    Action command;                           // what "drive" steps with (op "command"; under the hub's lock)
+    std::optional<std::string> command_text;  // a text prompt the next "drive" step applies
   };
   world::WorldModel& model_;
   const world::WorldInfo& info_;

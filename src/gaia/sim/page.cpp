@@ -66,8 +66,10 @@ function plot(id, commanded, read, lo, hi, color) {
     g.stroke();
   });
 }
+let stream = null, sent = null;
 async function start() {
   document.getElementById('error').textContent = '';
+  if (stream) { stream.close(); stream = null; }
   if (state.session !== null) { try { await api('close', { session: state.session }); } catch (e) {} }
   const req = {};
   const text = document.getElementById('text').value.trim();
@@ -76,7 +78,9 @@ async function start() {
   if (ep) req.prompt = { episode: /^[0-9]+$/.test(ep) ? Number(ep) : ep };
   const j = await api('create', req);
   state.session = j.session; state.step = j.steps; state.curv = []; state.spd = []; state.rcurv = []; state.rspd = [];
-  state.times = [];
+  state.times = []; sent = null;
+  await steer();
+  open();
 }
 function command() {
   const hard = keys.Shift ? 3 : 1;
@@ -85,46 +89,61 @@ function command() {
   if (keys.ArrowDown) state.speed = Math.max(0, state.speed - 1);
   return { speed: state.speed, curvature: state.steer };
 }
-async function drive() {
-  while (!limit || frames < limit) {
-    if (!state.running || state.session === null) { await new Promise(r => setTimeout(r, 100)); continue; }
-    const a = command();
-    const req = { session: state.session, speed: a.speed, curvature: a.curvature, frame: true, tokens: false };
-    if (state.text !== null) { req.text = state.text; state.text = null; }
-    try {
-      const j = await api('step', req);
-      document.getElementById('frame').src = j.frame;
-      state.step = j.step;
-      ++frames;
-      state.curv.push(1000 * a.curvature); state.spd.push(a.speed); state.times.push(performance.now());
-      const rb = j.read_back;
-      state.rcurv.push(rb ? 1000 * rb.curvature : null); state.rspd.push(rb ? rb.speed : null);
-      for (const k of ['curv', 'spd', 'rcurv', 'rspd']) if (state[k].length > 120) state[k].shift();
-      if (state.times.length > 20) state.times.shift();
-      const n = state.times.length, fps = n > 1 ? 1000 * (n - 1) / (state.times[n - 1] - state.times[0]) : 0;
-      document.getElementById('stats').textContent =
-        `step ${j.step}  ${fps.toFixed(2)} frames/s  ${j.ms.toFixed(0)} ms a step  speed ${a.speed.toFixed(1)} m/s` +
-        `  curvature ${(1000 * a.curvature).toFixed(0)} 1/km  text "${j.text}"` +
-        (rb ? `  read back: ${rb.speed.toFixed(1)} m/s, ${(1000 * rb.curvature).toFixed(1)} 1/km` : '');
-      plot('curv', state.curv, state.rcurv, -35, 35, '#6cf'); plot('speed', state.spd, state.rspd, 0, 30, '#fc6');
-    } catch (e) {
-      document.getElementById('error').textContent = e.message;
-      await new Promise(r => setTimeout(r, 1000));
-      if (/no session/.test(e.message)) await start().catch(() => {});
-    }
-  }
-  document.body.dataset.done = frames;
+// The session's standing command, sent when it changes (or a new text is to apply): the stream steps with it.
+async function steer() {
+  const a = command();
+  if (state.text === null && sent && sent.speed === a.speed && sent.curvature === a.curvature) return;
+  const req = { session: state.session, speed: a.speed, curvature: a.curvature };
+  if (state.text !== null) { req.text = state.text; state.text = null; }
+  sent = a;
+  await api('command', req);
+}
+// Frames arrive as server-sent events (GET /api/stream), one per step of the standing command.
+function open() {
+  if (stream || state.session === null || !state.running || (limit && frames >= limit)) return;
+  const left = limit ? '&frames=' + (limit - frames) : '';
+  stream = new EventSource('/api/stream?session=' + state.session + '&frame=1&tokens=0' + left);
+  stream.onmessage = ev => {
+    const j = JSON.parse(ev.data), a = j.command;
+    document.getElementById('frame').src = j.frame;
+    state.step = j.step;
+    ++frames;
+    state.curv.push(1000 * a.curvature); state.spd.push(a.speed); state.times.push(performance.now());
+    const rb = j.read_back;
+    state.rcurv.push(rb ? 1000 * rb.curvature : null); state.rspd.push(rb ? rb.speed : null);
+    for (const k of ['curv', 'spd', 'rcurv', 'rspd']) if (state[k].length > 120) state[k].shift();
+    if (state.times.length > 20) state.times.shift();
+    const n = state.times.length, fps = n > 1 ? 1000 * (n - 1) / (state.times[n - 1] - state.times[0]) : 0;
+    document.getElementById('stats').textContent =
+      `step ${j.step}  ${fps.toFixed(2)} frames/s  ${j.ms.toFixed(0)} ms a step  speed ${a.speed.toFixed(1)} m/s` +
+      `  curvature ${(1000 * a.curvature).toFixed(0)} 1/km  text "${j.text}"` +
+      (rb ? `  read back: ${rb.speed.toFixed(1)} m/s, ${(1000 * rb.curvature).toFixed(1)} 1/km` : '');
+    plot('curv', state.curv, state.rcurv, -35, 35, '#6cf'); plot('speed', state.spd, state.rspd, 0, 30, '#fc6');
+    if (limit && frames >= limit) { stream.close(); stream = null; document.body.dataset.done = frames; return; }
+    steer().catch(e => { document.getElementById('error').textContent = e.message; });
+  };
+  stream.addEventListener('error', ev => {  // a step failed (an "error" event), or the connection dropped
+    const message = ev.data ? JSON.parse(ev.data).error : 'the stream was interrupted';
+    document.getElementById('error').textContent = message;
+    if (stream) stream.close();
+    stream = null;
+    setTimeout(() => (/no session/.test(message) ? start() : Promise.resolve(open())).catch(() => {}), 1000);
+  });
 }
 addEventListener('keydown', e => {
   if (e.target.tagName === 'INPUT') return;  // typing a prompt
   keys[e.key] = true;
-  if (e.key === ' ') state.running = !state.running;
+  if (e.key === ' ') {
+    state.running = !state.running;
+    if (!state.running && stream) { stream.close(); stream = null; }
+    open();
+  }
   if (e.key === 'r' || e.key === 'R') start();
   if (e.key.startsWith('Arrow') || e.key === ' ') e.preventDefault();
 });
 addEventListener('keyup', e => { keys[e.key] = false; });
 document.getElementById('apply').onclick = () => { state.text = document.getElementById('text').value; };
-start().then(drive, e => { document.getElementById('error').textContent = e.message; drive(); });
+start().catch(e => { document.getElementById('error').textContent = e.message; });
 </script></body></html>
 )HTML";
   return page;

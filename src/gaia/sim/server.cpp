@@ -37,6 +37,42 @@ SimServer::SimServer(SessionHub& hub, const ServerOptions& o) : impl_(std::make_
       return answer(res, {400, {{"error", "the request body must be one JSON object"}}});
     answer(res, impl_->hub.handle(req.matches[1].str(), body));
   });
+  // Continuous driving: server-sent events, one per step of the session's standing command (op "command"), until
+  // the client goes, the session closes, `frames` are sent, or a step fails (an "error" event, then the end).
+  http.Get("/api/stream", [this](const httplib::Request& req, httplib::Response& res) {
+    nlohmann::json drive = nlohmann::json::object();
+    int64_t frames = 0;
+    for (const auto& [k, v] : req.params) {
+      if (k == "session" || k == "frames") {
+        char* end = nullptr;
+        const long long x = std::strtoll(v.c_str(), &end, 10);
+        if (v.empty() || *end || x < 0) return answer(res, {400, {{"error", "'" + k + "' must be a whole number"}}});
+        if (k == "session") drive["session"] = x;
+        else frames = x;
+      } else if (k == "frame" || k == "tokens") {
+        if (v != "0" && v != "1" && v != "true" && v != "false")
+          return answer(res, {400, {{"error", "'" + k + "' must be 1 or 0"}}});
+        drive[k] = v == "1" || v == "true";
+      } else {
+        return answer(res, {400, {{"error", "unknown parameter '" + k + "' (session, frames, frame, tokens)"}}});
+      }
+    }
+    if (!drive.contains("session")) return answer(res, {400, {{"error", "'session' must be the id create returned"}}});
+    // The first step answers before the stream opens, so that a bad session is a plain 4xx.
+    auto first = std::make_shared<HubReply>(impl_->hub.handle("drive", drive));
+    if (first->status != 200) return answer(res, *first);
+    auto sent = std::make_shared<int64_t>(0);
+    res.set_header("Cache-Control", "no-cache");
+    res.set_chunked_content_provider("text/event-stream", [this, drive, frames, first, sent](size_t, httplib::DataSink& sink) {
+      HubReply r = first->status ? std::move(*first) : impl_->hub.handle("drive", drive);
+      first->status = 0;
+      const bool ok = r.status == 200;
+      const std::string event = (ok ? "data: " : "event: error\ndata: ") + r.body.dump() + "\n\n";
+      if (!sink.write(event.data(), event.size())) return false;  // the client went
+      if (!ok || (frames > 0 && ++*sent >= frames)) sink.done();
+      return true;
+    });
+  });
   // Whatever else goes wrong in a handler: one line, and the server goes on.
   http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
     std::string what = "internal error";
