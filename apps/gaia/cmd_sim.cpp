@@ -1,6 +1,8 @@
 // gaia sim: closed-loop driving inside the world model (sim/hub.h, docs/sim.md). --stdio: one JSON request a line
 // on stdin, one JSON answer a line on stdout, for a policy in any language.
 #include <cstdio>
+#include <deque>
+#include <map>
 #include <iostream>
 #include <mutex>
 
@@ -104,11 +106,37 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
   emerging::Models m;  // the read-back's models: the tokenizer's decoder and the dynamics probe
   if (!g.probe.empty() && g.tokenizer.empty()) fail("--probe reads decoded frames: it needs --tokenizer");
   tokenizer::ImageTokenizer tok{nullptr};
+  // Decoded frames by their tokens: a step's frame and its read-back share one decoding, and the read-back's other
+  // frames were decoded at the steps before (so a step decodes one frame, not the probe's four).
+  struct Decoded {
+    std::mutex lock;
+    std::map<std::vector<int64_t>, cv::Mat> frames;
+    std::deque<std::vector<int64_t>> order;  // oldest first
+  };
+  auto cache = std::make_shared<Decoded>();
+  const size_t cache_size = size_t(8 * g.max_sessions);
+  auto decoded = [&, cache, cache_size](const torch::Tensor& t) {
+    auto c = t.to(torch::kCPU).to(torch::kLong).contiguous();
+    std::vector<int64_t> key(c.data_ptr<int64_t>(), c.data_ptr<int64_t>() + c.numel());
+    {
+      std::lock_guard<std::mutex> l(cache->lock);
+      auto it = cache->frames.find(key);
+      if (it != cache->frames.end()) return it->second;
+    }
+    cv::Mat img = tokenizer::decode_tokens(tok, c.view({1, info.grid_h, info.grid_w}), dev).at(0);
+    std::lock_guard<std::mutex> l(cache->lock);
+    if (cache->frames.emplace(key, img).second) cache->order.push_back(key);
+    while (cache->order.size() > cache_size) {
+      cache->frames.erase(cache->order.front());
+      cache->order.pop_front();
+    }
+    return img;
+  };
   if (!g.tokenizer.empty()) {
     tok = tokenizer::load_tokenizer(g.tokenizer, dev);
     emerging::check_tokenizer_fits(info, g.world, tok, g.tokenizer);
-    frames = [&](const torch::Tensor& t) -> nlohmann::json {
-      auto img = tokenizer::decode_tokens(tok, t.view({1, info.grid_h, info.grid_w}), dev).at(0);
+    frames = [&, decoded](const torch::Tensor& t) -> nlohmann::json {
+      auto img = decoded(t);
       std::vector<uchar> png;
       cv::imencode(".png", img, png);
       return "data:image/png;base64," + report::base64_encode({reinterpret_cast<const char*>(png.data()), png.size()});
@@ -122,8 +150,10 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
     m.dynamics = probe::load_probe(g.probe, dev);
     if (m.dynamics->kind != probe::ProbeKind::kDynamics) fail("{}: not a dynamics probe", g.probe);
     read_back.frames = m.dynamics->frames;
-    read_back.read = [&](const torch::Tensor& recent) -> nlohmann::json {
-      auto y = emerging::read_dynamics(m, emerging::decode(m, recent.unsqueeze(0)).at(0));  // [1, 2]
+    read_back.read = [&, decoded](const torch::Tensor& recent) -> nlohmann::json {
+      std::vector<cv::Mat> last;
+      for (int64_t i = 0; i < recent.size(0); ++i) last.push_back(decoded(recent[i]));
+      auto y = emerging::read_dynamics(m, last);  // [1, 2]
       return {{"speed", y[0][0].item<double>()}, {"curvature", y[0][1].item<double>()}};
     };
   }
@@ -147,7 +177,7 @@ void serve_stdio(sim::SessionHub& hub) {
       if (req.is_discarded() || !req.is_object())
         reply = {400, {{"error", fmt::format("line {}: not a JSON object", number)}}};
       else if (!req.contains("op") || !req["op"].is_string())
-        reply = {400, {{"error", fmt::format("line {}: no \"op\" (create, step, fork, reset, close, status)", number)}}};
+        reply = {400, {{"error", fmt::format("line {}: no \"op\" (create, step, command, drive, fork, reset, close, status)", number)}}};
       else {
         const auto op = req["op"].get<std::string>();
         req.erase("op");
