@@ -1,6 +1,7 @@
-// gaia sim serve's page, driven as a person drives it: headless Chromium through the DevTools protocol
-// (tests/browser/drive_page.py) holds the arrow keys against the shipped models, and the frames that arrive turn
-// the way the keys say, as the dynamics probe reads them back.
+// gaia sim serve with the shipped models, used from outside as people use it: its page driven as a person drives it
+// (headless Chromium through the DevTools protocol, tests/browser/drive_page.py, holds the arrow keys, and the
+// frames that arrive turn the way the keys say, as the dynamics probe reads them back), and the example policy
+// (examples/lane_keeper.py) driving a session closed loop.
 #include <chrono>
 #include <csignal>
 #include <thread>
@@ -27,32 +28,40 @@ double mean_of_last(const nlohmann::json& values, size_t n) {
 
 }  // namespace
 
+// `gaia sim serve` with the shipped world model, tokenizer and dynamics probe on a free port, stopped at the end.
+struct ServedShipped {
+  test::TempDir d;
+  int pid = 0;
+  std::string url;
+  ServedShipped() {
+    const auto models = test::source_dir() / "models", log = d / "serve.log";
+    auto started = test::run_shell(test::gaia_command("sim serve --world " + q(models / "world.safetensors") +
+                                                      " --tokenizer " + q(models / "tokenizer.safetensors") +
+                                                      " --probe " + q(models / "probe-dynamics.safetensors") +
+                                                      " --port 0") +
+                                   " > " + q(log) + " 2>&1 & echo $!");
+    pid = std::atoi(started.output.c_str());
+    for (int i = 0; i < 600 && pid > 0 && url.empty(); ++i) {  // "gaia sim: serving on http://127.0.0.1:PORT/ ..."
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      const auto text = fs::exists(log) ? read_file(log) : "";
+      const auto at = text.find("http://");
+      if (at != std::string::npos) url = text.substr(at, text.find(' ', at) - at);
+    }
+    if (url.empty()) ADD_FAILURE() << "gaia sim serve did not start: " << (fs::exists(log) ? read_file(log) : "");
+  }
+  ~ServedShipped() {
+    if (pid > 0) kill(pid, SIGTERM);
+  }
+};
+
 TEST(SimPageCli, KeysPressedThroughDevToolsSteerTheShippedModel) {
   if (std::system("command -v chromium > /dev/null 2>&1") != 0)
     GTEST_SKIP() << "chromium not installed (scripts/setup.sh installs it)";
   if (std::system("command -v python3 > /dev/null 2>&1") != 0) GTEST_SKIP() << "python3 not installed";
-  const auto models = test::source_dir() / "models";
-  test::TempDir d;
-  const auto log = d / "serve.log";
-  auto started = test::run_shell(test::gaia_command("sim serve --world " + q(models / "world.safetensors") +
-                                                    " --tokenizer " + q(models / "tokenizer.safetensors") +
-                                                    " --probe " + q(models / "probe-dynamics.safetensors") +
-                                                    " --port 0") +
-                                 " > " + q(log) + " 2>&1 & echo $!");
-  const int pid = std::atoi(started.output.c_str());
-  ASSERT_GT(pid, 0) << started.output;
-  struct Stop {
-    int pid;
-    ~Stop() { kill(pid, SIGTERM); }
-  } stop{pid};
-  std::string url;
-  for (int i = 0; i < 600 && url.empty(); ++i) {  // "gaia sim: serving on http://127.0.0.1:PORT/ ..."
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    const auto text = fs::exists(log) ? read_file(log) : "";
-    const auto at = text.find("http://");
-    if (at != std::string::npos) url = text.substr(at, text.find(' ', at) - at);
-  }
-  ASSERT_FALSE(url.empty()) << read_file(log);
+  ServedShipped s;
+  ASSERT_FALSE(s.url.empty());
+  const auto& url = s.url;
+  const auto& d = s.d;
   auto r = test::run_shell("timeout 300 python3 " + q(test::source_dir() / "tests" / "browser" / "drive_page.py") +
                            " " + q(url) + " " + q(d / "profile") +
                            " none:2 Shift+ArrowLeft:16 none:6 Shift+ArrowRight:16 2>&1");
@@ -74,4 +83,27 @@ TEST(SimPageCli, KeysPressedThroughDevToolsSteerTheShippedModel) {
   EXPECT_GT(read_left, 2.0) << r.output;
   EXPECT_GT(read_left - read_right, 2.0) << "read back " << read_left << " 1/km pressing left, " << read_right
                                          << " pressing right";
+}
+
+// The example policy: a few seconds of closed-loop driving through the server, its summary and its drive record.
+TEST(SimPageCli, TheLaneKeeperExampleDrivesASessionClosedLoop) {
+  if (std::system("command -v python3 > /dev/null 2>&1") != 0) GTEST_SKIP() << "python3 not installed";
+  ServedShipped s;
+  ASSERT_FALSE(s.url.empty());
+  const auto out = s.d / "drive.json";
+  auto r = test::run_shell("timeout 300 python3 " + q(test::source_dir() / "examples" / "lane_keeper.py") +
+                           " --server " + q(s.url) + " --seconds 4 --period 4 --out " + q(out) + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("read-back against the plan over"), std::string::npos) << r.output;
+  const auto drive = nlohmann::json::parse(read_file(out));
+  ASSERT_EQ(drive["steps"].size(), 25u);  // 4 s at 6.25 Hz
+  const auto& last = drive["steps"].back();
+  EXPECT_EQ(last["tokens"].size(), 144u);
+  EXPECT_TRUE(last["read_back"].is_object()) << last.dump();
+  EXPECT_TRUE(drive["summary"]["curvature_spearman"].is_number()) << drive["summary"].dump();
+  // A server that is not there: one line, a non-zero exit.
+  r = test::run_shell("python3 " + q(test::source_dir() / "examples" / "lane_keeper.py") +
+                      " --server http://127.0.0.1:9 --seconds 1 2>&1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("cannot reach"), std::string::npos) << r.output;
 }

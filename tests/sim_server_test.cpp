@@ -40,7 +40,7 @@ struct Served {
     model->eval();
     // A frame as a 1x1 PNG data: URI (the tokenizer's decoder in the app).
     hub = std::make_unique<sim::SessionHub>(model, info, sim::HubLimits{max_sessions, 4, 600}, sim::PromptSource{},
-                                            [](const torch::Tensor&) {
+                                            [](const torch::Tensor&, const std::string&) {
                                               return json("data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAA"
                                                           "fFcSJAAAADUlEQVR42mNkYPhfDwAChwGA60e6kgAAAABJRU5ErkJggg==");
                                             });
@@ -163,7 +163,7 @@ TEST(SimServer, TheStreamSendsAStepPerEventWithTheStandingCommand) {
   EXPECT_GE(body["step"].get<int64_t>(), 7);
   for (const auto& [query, words] : std::vector<std::pair<std::string, std::string>>{
            {"session=99", "no session 99"}, {"", "'session'"}, {"session=x", "whole number"},
-           {"session=1&speed=3", "unknown parameter 'speed'"}, {"session=1&frame=yes", "'frame' must be 1 or 0"}}) {
+           {"session=1&speed=3", "unknown parameter 'speed'"}, {"session=1&frame=yes", "'frame' must be 1 or 0, png or jpeg"}}) {
     auto bad = c.Get(("/api/stream?" + query).c_str());
     ASSERT_TRUE(bad);
     EXPECT_GE(bad->status, 400) << query;

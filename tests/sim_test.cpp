@@ -149,7 +149,9 @@ nlohmann::json raw_prompt(int64_t frames) {
 // every bad request a 4xx with one line that leaves the hub serving.
 TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) {
   Fixture f;
-  sim::SessionHub hub(f.model, f.info, {2, 0, 600}, {}, [](const torch::Tensor& t) { return t.sum().item<int64_t>(); });
+  sim::SessionHub hub(f.model, f.info, {2, 0, 600}, {}, [](const torch::Tensor& t, const std::string& format) {
+    return nlohmann::json::array({format, t.sum().item<int64_t>()});
+  });
   auto r = hub.handle("create", {{"prompt", raw_prompt(2)}, {"seed", 9}, {"text", "rain"}});
   ASSERT_EQ(r.status, 200) << r.body.dump();
   const auto id = r.body["session"].get<int64_t>();
@@ -161,12 +163,14 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
   direct.start(torch::stack({torch::full({kN}, 0, torch::kLong), torch::full({kN}, 3, torch::kLong)}),
                torch::tensor({{7.0f, 0.001f}, {7.5f, NAN}}), "rain");
   for (int k = 0; k < 3; ++k) {
-    r = hub.handle("step", {{"session", id}, {"speed", 8}, {"curvature", 0.01}, {"frame", true}});
+    const nlohmann::json frame = k == 2 ? nlohmann::json("jpeg") : nlohmann::json(true);
+    r = hub.handle("step", {{"session", id}, {"speed", 8}, {"curvature", 0.01}, {"frame", frame}});
     ASSERT_EQ(r.status, 200) << r.body.dump();
     auto expected = direct.step({8, 0.01});
     EXPECT_EQ(r.body["tokens"].get<std::vector<int64_t>>(),
               std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kN));
-    EXPECT_EQ(r.body["frame"], expected.sum().item<int64_t>());  // the app's encoder, called on the frame's tokens
+    // the app's encoder, called on the frame's tokens in the format asked (true: PNG)
+    EXPECT_EQ(r.body["frame"], nlohmann::json::array({k == 2 ? "jpeg" : "png", expected.sum().item<int64_t>()}));
     EXPECT_EQ(r.body["step"], 2 + k);
   }
   r = hub.handle("fork", {{"session", id}});
@@ -185,6 +189,7 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
       {"step", {{"session", 99}}, 404, "no session 99"},
       {"step", {{"speed", 8}}, 400, "'session'"},
       {"fly", nlohmann::json::object(), 404, "unknown request 'fly'"},
+      {"step", {{"session", id}, {"frame", "gif"}}, 400, "'frame' must be true, false, \"png\" or \"jpeg\""},
       {"create", {{"prompt", {{"tokens", {{1, 2}}}}}}, 400, "'prompt.tokens[0]' must be a list of 6 ids"},
       {"create", {{"prompt", {{"episode", "a"}}}}, 400, "no token dataset"},
       {"create", {{"guidance", -1}}, 400, "'guidance' must be in [0, 100]"},
@@ -248,7 +253,7 @@ TEST(SimHub, ABusySessionRefusesRatherThanPilesUp) {
   std::mutex gate;
   gate.lock();
   std::atomic<bool> inside{false};
-  sim::SessionHub hub(f.model, f.info, {4, 0, 600}, {}, [&](const torch::Tensor&) {
+  sim::SessionHub hub(f.model, f.info, {4, 0, 600}, {}, [&](const torch::Tensor&, const std::string&) {
     inside = true;
     std::lock_guard<std::mutex> wait(gate);
     return nlohmann::json(nullptr);

@@ -620,7 +620,7 @@ TEST(SimCli, StdioSessionsGiveTheTokensOfGenerateAndAnswerEveryLine) {
                     "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01, \"frame\": true}\n"
                     "{\"op\": \"step\", \"session\": 7}\n"
                     "{\"op\": \"create\", \"prompt\": {\"episode\": \"nowhere\"}}\n"
-                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n");
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01, \"frame\": \"jpeg\"}\n");
   r = test::run_shell(test::gaia_command("sim " + q(p.tokens) + " --world " + q(p.trained) + " --tokenizer " +
                                          q(p.tok / "tokenizer.safetensors") + p.tiny() + " --stdio") +
                       " < " + q(requests) + " 2>&1");
@@ -634,6 +634,7 @@ TEST(SimCli, StdioSessionsGiveTheTokensOfGenerateAndAnswerEveryLine) {
   EXPECT_EQ(answers[0]["steps"], 2);
   EXPECT_NE(answers[5]["error"].get<std::string>().find("nowhere"), std::string::npos);
   EXPECT_EQ(answers[3]["frame"].get<std::string>().rfind("data:image/png;base64,", 0), 0u);
+  EXPECT_EQ(answers[6]["frame"].get<std::string>().rfind("data:image/jpeg;base64,/9j/", 0), 0u);  // a JPEG's magic
   const size_t n = expected.size() / 5;
   size_t k = 2;
   for (size_t i : {1, 3, 6}) {

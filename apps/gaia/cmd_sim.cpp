@@ -135,11 +135,12 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
   if (!g.tokenizer.empty()) {
     tok = tokenizer::load_tokenizer(g.tokenizer, dev);
     emerging::check_tokenizer_fits(info, g.world, tok, g.tokenizer);
-    frames = [&, decoded](const torch::Tensor& t) -> nlohmann::json {
+    frames = [&, decoded](const torch::Tensor& t, const std::string& format) -> nlohmann::json {
       auto img = decoded(t);
-      std::vector<uchar> png;
-      cv::imencode(".png", img, png);
-      return "data:image/png;base64," + report::base64_encode({reinterpret_cast<const char*>(png.data()), png.size()});
+      std::vector<uchar> bytes;
+      cv::imencode(format == "jpeg" ? ".jpg" : ".png", img, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
+      return "data:image/" + format + ";base64," +
+             report::base64_encode({reinterpret_cast<const char*>(bytes.data()), bytes.size()});
     };
   }
   if (!g.probe.empty()) {

@@ -205,13 +205,23 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
           text = std::move(e.command_text);
           e.command_text.reset();
         }
-        const bool want_frame = f.flag("frame", false), want_tokens = f.flag("tokens", true);
+        // "frame": true or "png" (lossless), "jpeg" (a tenth of the bytes), false (none)
+        std::string frame_format;
+        if (f.has("frame") && r.at("frame").is_string()) {
+          frame_format = r.at("frame").get<std::string>();
+          if (frame_format != "png" && frame_format != "jpeg") fail("'frame' must be true, false, \"png\" or \"jpeg\"");
+        } else if (f.has("frame") && !r.at("frame").is_boolean()) {
+          fail("'frame' must be true, false, \"png\" or \"jpeg\"");
+        } else if (f.flag("frame", false)) {
+          frame_format = "png";
+        }
+        const bool want_tokens = f.flag("tokens", true);
         const auto t0 = std::chrono::steady_clock::now();
         auto tokens = e.session->step(a, text);
         json body{{"session", id}, {"step", e.session->steps() - 1}, {"text", e.session->text()}};
         if (op == "drive") body["command"] = {{"speed", a.speed}, {"curvature", a.curvature}};
         if (want_tokens) body["tokens"] = std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel());
-        if (want_frame) body["frame"] = frames_ ? frames_(tokens) : json(nullptr);
+        if (!frame_format.empty()) body["frame"] = frames_ ? frames_(tokens, frame_format) : json(nullptr);
         const int64_t K = read_back_.frames, steps = e.session->steps();
         if (read_back_.read && K > 0 && steps >= K) body["read_back"] = read_back_.read(e.session->tokens().narrow(0, steps - K, K));
         body["ms"] = 1000 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -31,13 +31,13 @@ struct HubReply {
 
 // What the app supplies: a create request's "prompt" object other than {"tokens": ..., "actions": ...} (which the
 // hub reads itself) -> the prompt's tokens [P, n] and actions [P, 2] (m/s, 1/m; undefined = none), failing with one
-// line on a bad one; and a frame's tokens [n] -> what a step returns as "frame" when asked (a data: URI of a PNG;
-// null where this build cannot decode).
+// line on a bad one; and a frame's tokens [n] and an image format -> what a step returns as "frame" when asked (a
+// data: URI of a PNG or a JPEG; null where this build cannot decode).
 struct Prompt {
   torch::Tensor tokens, actions;
 };
 using PromptSource = std::function<Prompt(const nlohmann::json& prompt)>;
-using FrameEncoder = std::function<nlohmann::json(const torch::Tensor& tokens)>;
+using FrameEncoder = std::function<nlohmann::json(const torch::Tensor& tokens, const std::string& format)>;  // "png" | "jpeg"
 // What the frames show, read back (the dynamics probe through the tokenizer's decoder): the last `frames` steps'
 // tokens [frames, n] -> {"speed": m/s, "curvature": 1/m}, added to each step's answer once there are that many.
 struct ReadBack {

@@ -49,9 +49,11 @@ SimServer::SimServer(SessionHub& hub, const ServerOptions& o) : impl_(std::make_
         if (v.empty() || *end || x < 0) return answer(res, {400, {{"error", "'" + k + "' must be a whole number"}}});
         if (k == "session") drive["session"] = x;
         else frames = x;
+      } else if (k == "frame" && (v == "png" || v == "jpeg")) {
+        drive[k] = v;
       } else if (k == "frame" || k == "tokens") {
         if (v != "0" && v != "1" && v != "true" && v != "false")
-          return answer(res, {400, {{"error", "'" + k + "' must be 1 or 0"}}});
+          return answer(res, {400, {{"error", "'" + k + "' must be 1 or 0" + (k == "frame" ? ", png or jpeg" : "")}}});
         drive[k] = v == "1" || v == "true";
       } else {
         return answer(res, {400, {{"error", "unknown parameter '" + k + "' (session, frames, frame, tokens)"}}});
