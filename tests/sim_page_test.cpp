@@ -3,6 +3,7 @@
 // frames that arrive turn the way the keys say, as the dynamics probe reads them back), and the example policy
 // (examples/lane_keeper.py) driving a session closed loop.
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <thread>
 
@@ -62,27 +63,43 @@ TEST(SimPageCli, KeysPressedThroughDevToolsSteerTheShippedModel) {
   ASSERT_FALSE(s.url.empty());
   const auto& url = s.url;
   const auto& d = s.d;
+  // Action guidance 16 against the mirrored command, as gaia generate and gaia eval steer.
   auto r = test::run_shell("timeout 300 python3 " + q(test::source_dir() / "tests" / "browser" / "drive_page.py") +
-                           " " + q(url) + " " + q(d / "profile") +
-                           " none:2 Shift+ArrowLeft:16 none:6 Shift+ArrowRight:16 2>&1");
+                           " " + q(url + "?guidance=16") + " " + q(d / "profile") +
+                           " none:2 Shift+ArrowLeft:20 none:4 Shift+ArrowRight:20 2>&1");
   ASSERT_EQ(r.status, 0) << r.output;
   const auto out = nlohmann::json::parse(r.output.substr(r.output.find('{')));
   const auto& phases = out.at("phases");
   ASSERT_EQ(phases.size(), 4u) << r.output;
+  std::vector<double> commanded, read;  // every frame shown, in order: its command (1/km) and its read-back
   for (const auto& p : phases) {
     EXPECT_GE(p["frames"].get<int>(), 2) << p.dump();
     EXPECT_TRUE(p["image"].get<bool>()) << "frames arrive as images";
+    for (size_t i = 0; i < p["curvature"].size(); ++i) {
+      commanded.push_back(p["curvature"][i].get<double>());
+      read.push_back(p["read_back"][i].is_null() ? std::nan("") : p["read_back"][i].get<double>());
+    }
   }
-  const auto &left = phases[1], &right = phases[3];
-  // The keys steer: the command of the phase's last frames is the held key's (Shift: 30 1/km; + = left).
-  EXPECT_DOUBLE_EQ(mean_of_last(left["curvature"], 8), 30.0) << left.dump();
-  EXPECT_DOUBLE_EQ(mean_of_last(right["curvature"], 8), -30.0) << right.dump();
-  // And the frames turn that way: what the probe reads from the last frames of each phase.
-  const double read_left = mean_of_last(left["read_back"], 8), read_right = mean_of_last(right["read_back"], 8);
-  std::printf("read back %.1f 1/km pressing left, %.1f pressing right\n", read_left, read_right);
-  EXPECT_GT(read_left, 2.0) << r.output;
-  EXPECT_GT(read_left - read_right, 2.0) << "read back " << read_left << " 1/km pressing left, " << read_right
-                                         << " pressing right";
+  // The keys steer: the command of each key phase's last frames is the held key's (Shift: 30 1/km; + = left).
+  EXPECT_DOUBLE_EQ(mean_of_last(phases[1]["curvature"], 8), 30.0) << phases[1].dump();
+  EXPECT_DOUBLE_EQ(mean_of_last(phases[3]["curvature"], 8), -30.0) << phases[3].dump();
+  // And the frames turn that way: the read-back of the 4 frames the probe reads, where all 4 were driven left, and
+  // where all 4 were driven right (the stream runs ahead of the page, so the phases are not the commands).
+  double left = 0, right = 0;
+  int nl = 0, nr = 0;
+  for (size_t j = 3; j < commanded.size(); ++j) {
+    if (std::isnan(read[j])) continue;
+    bool all_left = true, all_right = true;
+    for (size_t i = j - 3; i <= j; ++i) all_left = all_left && commanded[i] > 0, all_right = all_right && commanded[i] < 0;
+    if (all_left) left += read[j], ++nl;
+    if (all_right) right += read[j], ++nr;
+  }
+  ASSERT_GE(nl, 6);
+  ASSERT_GE(nr, 6);
+  left /= nl, right /= nr;
+  std::printf("read back %.1f 1/km driven left (%d frames), %.1f driven right (%d)\n", left, nl, right, nr);
+  EXPECT_GT(left, 2.0) << r.output;
+  EXPECT_GT(left - right, 2.0) << "read back " << left << " 1/km driven left, " << right << " driven right";
 }
 
 // The example policy: a few seconds of closed-loop driving through the server, its summary and its drive record.

@@ -205,7 +205,7 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
           text = std::move(e.command_text);
           e.command_text.reset();
         }
-        // "frame": true or "png" (lossless), "jpeg" (a tenth of the bytes), false (none)
+        // "frame": true or "png" (lossless), "jpeg" (smaller, lossy), false (none)
         std::string frame_format;
         if (f.has("frame") && r.at("frame").is_string()) {
           frame_format = r.at("frame").get<std::string>();

@@ -35,8 +35,8 @@ const std::string& driving_page() {
 const state = { session: null, speed: 8, steer: 0, running: true, text: null, curv: [], spd: [], rcurv: [], rspd: [],
                 times: [], step: 0 };
 const keys = {};
-// ?text=...&episode=...: the prompt; ?hold=ArrowLeft,Shift: keys held from the start; ?frames=N: stop after N frames
-// (a scripted drive: what the tests run in a headless browser).
+// ?text=...&episode=...: the prompt; ?guidance=S: action guidance (default the weights'); ?hold=ArrowLeft,Shift: keys
+// held from the start; ?frames=N: stop after N frames (a scripted drive: what the tests run in a headless browser).
 const params = new URLSearchParams(location.search);
 for (const k of (params.get('hold') || '').split(',')) if (k) keys[k] = true;
 const limit = Number(params.get('frames') || 0);
@@ -72,6 +72,7 @@ async function start() {
   if (stream) { stream.close(); stream = null; }
   if (state.session !== null) { try { await api('close', { session: state.session }); } catch (e) {} }
   const req = {};
+  if (params.get('guidance')) req.guidance = Number(params.get('guidance'));
   const text = document.getElementById('text').value.trim();
   if (text) req.text = text;
   const ep = document.getElementById('episode').value.trim();

@@ -164,16 +164,20 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
   const bool within = guided_ && !text_guided && o_.sampling.guide_actions_within_top_k &&
                       o_.sampling.strategy == Strategy::TopK;  // SamplingOptions::guide_actions_within_top_k
   std::shared_ptr<Lookahead::Progress> progress;
-  if (o_.lookahead && o_.window_stride == 1 && win_ == L.T - 1 && k >= L.T - 2 && dev_.is_cpu() &&
+  if (o_.lookahead && fast_ && o_.window_stride == 1 && win_ == L.T - 1 && k >= L.T - 2 &&
       at::get_num_threads() == 1) {
     // The next step slides: encode its history on a second thread now, steps k - T + 2 .. k - 1 at once, then this
     // step's tokens in fixed chunks as they are sampled (fixed, so that the numbers never depend on timing).
     const int64_t first = k - (L.T - 2), t = L.T - 2;
     if (ahead_.cache.k.empty()) ahead_.cache = model_->make_cache(B, L.length());
-    auto hist = cond.at(first, k, tokens_.narrow(1, first, k - first).clone());
-    auto now = cond.at(k, k + 1, tokens_.narrow(1, k, 1).clone());  // its text and actions (tokens: filled below)
-    for (auto* f : {&now.actions, &now.text_ids, &now.text_emb, &now.use_action, &now.use_text})
-      if (f->defined()) *f = f->clone();
+    // The job's own copies: the caller may change its prompt's tensors once this step returns.
+    auto own = [](WorldBatch b) {
+      for (auto* f : {&b.tokens, &b.actions, &b.text_ids, &b.text_emb, &b.use_action, &b.use_text})
+        if (f->defined()) *f = f->clone();
+      return b;
+    };
+    auto hist = own(cond.at(first, k, tokens_.narrow(1, first, k - first)));
+    auto now = own(cond.at(k, k + 1, tokens_.narrow(1, k, 1)));  // its text and actions (tokens: filled below)
     if (ahead_.job.valid()) ahead_.job.wait();  // an abandoned job may still hold the cache
     progress = std::make_shared<Lookahead::Progress>(n);
     auto model = model_;

@@ -43,8 +43,9 @@ struct RolloutOptions {
   // re-encodes the whole kept history after every frame, because every kept step's temporal position changes;
   // stride S re-encodes once every S frames, and frames see T - S to T - 1 steps of history.
   int window_stride = 1;
-  // With stride 1 on the CPU at one intra-op thread: encode the next window's history on a second thread while a
-  // frame samples (RolloutStepper::Lookahead). The tokens are those of the plain path up to float rounding.
+  // With stride 1 where the fused token step applies (the CPU, a few rows) at one intra-op thread: encode the next
+  // window's history on a second thread while a frame samples (RolloutStepper::Lookahead). The tokens are those of
+  // the plain path up to float rounding.
   bool lookahead = true;
   // Sampling's per-token path on raw memory (token_step.h) where it applies; false: the general LibTorch path (the
   // reference of tests and benchmarks).
@@ -87,8 +88,9 @@ class RolloutStepper {
   KVCache cache_;
   std::shared_ptr<const TokenStep> fast_;  // sampling's per-token path where it applies (shared by forks)
   // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
-  // ahead and the newest comes token by token: on the CPU with one intra-op thread, a second thread encodes the
-  // next window while the frame samples. A copy of the stepper waits for the job and gets its own cache.
+  // ahead and the newest comes token by token: where the fused token step runs at one intra-op thread, a second
+  // thread encodes the next window while the frame samples. A copy of the stepper waits for the job and gets its
+  // own cache.
   struct Lookahead {
     static constexpr int64_t kChunk = 48;  // image tokens of the newest step encoded at once
     // How many of the newest step's tokens are out: the job waits for each chunk.

@@ -18,7 +18,7 @@ constexpr int64_t kMaxRows = 4;  // beyond this a row-by-row product loses to Li
 
 torch::Tensor copied(const torch::Tensor& t) { return t.detach().contiguous().clone(); }
 
-constexpr int64_t kLanes = 64;  // outputs kept in registers across the inner products (eight AVX2 registers)
+constexpr int64_t kLanes = kSimdLanes;
 
 // A linear layer's weight [out, in] packed for linear_rows: [out / 64][in][64] (then the last out % 64 outputs as
 // [in][out % 64]), so that each run of 64 outputs reads one contiguous stretch of memory.

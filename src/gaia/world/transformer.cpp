@@ -28,12 +28,14 @@ namespace {
 constexpr int64_t kQueryBlock = 128;
 
 // q [B, H, Lq, hd], kT [B, H, hd, Lk] (keys transposed), v [B, H, Lk, hd]; query i sits at key position
-// offset + i and sees keys <= that.
-torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torch::Tensor& v, int64_t offset) {
+// offset + i and sees keys <= that. `cached`: the keys are a cache being filled (inference), where long appends on
+// the CPU attend block by block; training keeps the one square its memory plan counts.
+torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torch::Tensor& v, int64_t offset,
+                     bool cached) {
   const int64_t Lq = q.size(2), Lk = kT.size(3);
   const auto k = kT.transpose(2, 3);
   if (Lq == 1) return attention(q, k, v);  // one query after the cached keys sees all of them
-  if (q.device().is_cpu() && Lq > 2 * kQueryBlock) {
+  if (cached && q.device().is_cpu() && Lq > 2 * kQueryBlock) {
     // Block by block, each seeing only the keys up to its last query: the scores above the diagonal, about half
     // of a square's, are mostly never computed.
     std::vector<torch::Tensor> parts;
@@ -49,8 +51,7 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torc
 }
 
 // The two inner loops of one query's attention (torch/simd.h: also compiled for AVX2).
-
-constexpr int64_t kLanes = 64;  // outputs kept in registers across a loop (eight AVX2 registers)
+constexpr int64_t kLanes = kSimdLanes;
 
 // out[j] = scale * q . k_j for j < Lk, keys transposed (KT row e holds component e of every key, row stride `cap`):
 // 64 keys at a time are scored in registers, one broadcast multiply-add per component over contiguous keys (no
@@ -160,7 +161,7 @@ torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* 
     kT = K.narrow(3, 0, offset + L);
     v = V.narrow(2, 0, offset + L);
   }
-  auto y = attend(q, kT, v, offset);  // [B, H, L, hd]
+  auto y = attend(q, kT, v, offset, cache != nullptr);  // [B, H, L, hd]
   return proj->forward(y.transpose(1, 2).reshape({B, L, d}));
 }
 
