@@ -71,6 +71,8 @@ def main():
     ap.add_argument("--speed", type=float, default=8, help="speed to hold, m/s")
     ap.add_argument("--bend", type=float, default=0.01, help="curvature of the planned bends, 1/m")
     ap.add_argument("--period", type=float, default=16, help="seconds of one straight-left-straight-right cycle")
+    ap.add_argument("--plan", help="a JSON file of [speed m/s, curvature 1/m] per step (6.25 Hz) to follow instead "
+                                   "of the bends, e.g. a recorded drive's")
     ap.add_argument("--gain", type=float, default=0.5, help="how strongly the read-back corrects the command")
     ap.add_argument("--guidance", type=float, default=16,
                     help="action guidance scale against the mirrored command (gaia eval and gaia generate steer with 16)")
@@ -79,6 +81,12 @@ def main():
     a = ap.parse_args()
     server = a.server.rstrip("/")
 
+    recorded = None
+    if a.plan:
+        with open(a.plan) as f:
+            recorded = json.load(f)
+        if not isinstance(recorded, list) or not all(isinstance(r, list) and len(r) == 2 for r in recorded):
+            sys.exit(f"lane_keeper: {a.plan}: expected a JSON list of [speed, curvature] pairs")
     create = {"seed": a.seed, "guidance": a.guidance}
     if a.episode is not None:
         create["prompt"] = {"episode": int(a.episode) if a.episode.isdigit() else a.episode, "frames": a.prompt_frames}
@@ -86,13 +94,18 @@ def main():
     steps, window = [], []  # window: the last 4 plans, what the probe's 4 frames were driven under
     start = time.perf_counter()
     read = None
-    for k in range(int(round(a.seconds * RATE))):
+    total = int(round(a.seconds * RATE))
+    if recorded is not None:
+        total = min(total, len(recorded))
+    for k in range(total):
         t = k / RATE
-        target = plan(t, a.bend, a.period)
-        curvature, speed = target, a.speed
+        target, held = plan(t, a.bend, a.period), a.speed
+        if recorded is not None:
+            held, target = recorded[k]
+        curvature, speed = target, held
         if read is not None:  # feedback: what the frames show against what was planned for them
             curvature += a.gain * (sum(window) / len(window) - read["curvature"])
-            speed += a.gain * (a.speed - read["speed"])
+            speed += a.gain * (held - read["speed"])
         curvature = max(-0.05, min(0.05, curvature))
         speed = max(0.0, min(30.0, speed))
         r = post(server, "step", {"session": session, "speed": speed, "curvature": curvature})

@@ -6,6 +6,9 @@ accuracy), and whether the minute collapses: copy rate and unigram entropy per 1
 `gaia eval --only long`), against the same statistics of the dataset's own recorded windows.
 
     tools/bench-closed-loop.py TOKENS [GAIA_BINARY] [SECONDS] [EPISODES] [LANE_KEEPER FLAGS...]   (standard library only)
+
+With the flag --recorded among the lane keeper's, each drive follows its prompt episode's own recorded commands
+(after the 4 prompt frames) instead of the bends, so that its minute is compared with the same drive's record.
 """
 import array, ast, json, math, os, socket, subprocess, sys, tempfile
 
@@ -15,18 +18,20 @@ gaia = os.path.abspath(sys.argv[2] if len(sys.argv) > 2 else os.path.join(root, 
 seconds = float(sys.argv[3]) if len(sys.argv) > 3 else 60
 episodes = [int(e) for e in (sys.argv[4] if len(sys.argv) > 4 else "0,1,2,3").split(",")]
 keeper_flags = sys.argv[5:]
+recorded = "--recorded" in keeper_flags
+keeper_flags = [f for f in keeper_flags if f != "--recorded"]
 RATE, WINDOW = 6.25, 62  # Hz; a 10 s window in frames, as gaia eval's long rollouts
 
 
 def read_npy(path):
-    """A little-endian integer .npy array -> (shape, flat list)."""
+    """A little-endian integer or float32 .npy array -> (shape, flat list)."""
     with open(path, "rb") as f:
         if f.read(6) != b"\x93NUMPY":
             sys.exit(f"{path}: not a .npy file")
         major = f.read(2)[0]
         hlen = int.from_bytes(f.read(2 if major == 1 else 4), "little")
         head = ast.literal_eval(f.read(hlen).decode("latin1"))
-        codes = {"<i2": "h", "<i4": "i", "<i8": "q", "<u2": "H", "|u1": "B"}
+        codes = {"<i2": "h", "<i4": "i", "<i8": "q", "<u2": "H", "|u1": "B", "<f4": "f"}
         if head["descr"] not in codes or head["fortran_order"]:
             sys.exit(f"{path}: {head['descr']} tokens are not read here")
         data = array.array(codes[head["descr"]])
@@ -75,10 +80,16 @@ server.stdout.readline()  # "serving on ..."
 rows, pooled = [], {"planned": [], "got": [], "windows": []}
 try:
     for e in episodes:
-        with tempfile.NamedTemporaryFile(suffix=".json") as out:
+        with tempfile.NamedTemporaryFile(suffix=".json") as out, tempfile.NamedTemporaryFile("w", suffix=".json") as plan:
+            flags = list(keeper_flags)
+            if recorded:  # the episode's commands after its 4 prompt frames
+                shape, flat = read_npy(os.path.join(tokens_dir, "episodes", eps[e], "actions.npy"))
+                json.dump([[flat[2 * i], flat[2 * i + 1]] for i in range(4, shape[0])], plan)
+                plan.flush()
+                flags += ["--plan", plan.name]
             subprocess.run([sys.executable, os.path.join(root, "examples", "lane_keeper.py"), "--server",
-                            f"http://127.0.0.1:{port}", "--episode", str(e), "--seconds", str(seconds), "--seed", str(e),
-                            "--out", out.name] + keeper_flags, check=True, stdout=subprocess.DEVNULL)
+                            f"http://127.0.0.1:{port}", "--episode", eps[e], "--seconds", str(seconds), "--seed", str(e),
+                            "--out", out.name] + flags, check=True, stdout=subprocess.DEVNULL)
             d = json.load(open(out.name))
         steps = d["steps"]
         w = windows_stats([s["tokens"] for s in steps])
