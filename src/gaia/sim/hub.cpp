@@ -12,6 +12,7 @@ namespace {
 using nlohmann::json;
 
 HubReply error(int status, const std::string& message) { return {status, json{{"error", message}}}; }
+HubReply no_session(int64_t id) { return error(404, fmt::format("no session {} (closed, expired or never created)", id)); }
 
 // {"tokens": [[n ids] x P], "actions": [[speed m/s, curvature 1/m] x P]} (actions optional; null = unknown).
 Prompt raw_prompt(const json& q, int64_t n) {
@@ -156,7 +157,7 @@ HubReply SessionHub::with_session(const json& r, const std::function<HubReply(En
     std::lock_guard<std::mutex> g(lock_);
     expire();
     auto it = sessions_.find(id);
-    if (it == sessions_.end()) return error(404, fmt::format("no session {} (closed, expired or never created)", id));
+    if (it == sessions_.end()) return no_session(id);
     e = it->second;
     if (e->pending > limits_.max_queue)
       return error(429, fmt::format("session {} is busy with {} request(s) waiting: wait for their answers", id,
@@ -238,7 +239,7 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
       if (f.has("text")) text = f.text("text", "");
       std::lock_guard<std::mutex> g(lock_);
       auto it = sessions_.find(id);
-      if (it == sessions_.end()) return error(404, fmt::format("no session {} (closed, expired or never created)", id));
+      if (it == sessions_.end()) return no_session(id);
       it->second->command = a;
       if (text) it->second->command_text = text;
       it->second->used = std::chrono::steady_clock::now();
