@@ -17,6 +17,7 @@ PKGS=(
   libcpp-httplib-dev           # gaia sim serve (HTTP on loopback)
   libfmt-dev libspdlog-dev     # formatting and logging
   libgtest-dev libgmock-dev libbenchmark-dev
+  libsentencepiece-dev         # T5's tokenizer (SentencePiece) for the frozen text encoder (§2.1)
   liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)
   chromium                     # headless browser: the report test renders gaia report pages and checks screenshots
 )

@@ -12,6 +12,7 @@
 #include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
+#include "gaia/world/prompt_text.h"
 #include "gaia/world/rollout.h"
 #include "gaia/world/token_dataset.h"
 #include "gaia/world/token_file.h"
@@ -30,7 +31,7 @@ namespace {
 
 struct GenerateFlags {
   std::string world, tokenizer, tokens, episode, video, actions_csv, steer = "none", text, negative,
-      action_negative = "mirror";
+      action_negative = "mirror", t5, text_emb, negative_emb;
   std::string sampling, token_schedule = "constant", frame_schedule = "constant";
   int start = 0, prompt_frames = -1, frames = 8, futures = 1, top_k = -1, plateau = 0, window_stride = 1;
   double speed = -1, top_p = 0.9, temperature = -1, guidance = 0;
@@ -76,6 +77,11 @@ void register_generate(CLI::App& app) {
   cmd->add_option("--speed", g->speed, "speed for every generated frame (m/s)")->check(number_in({0, 100}));
   cmd->add_option("--text", g->text, "text prompt for every frame");
   cmd->add_option("--negative", g->negative, "negative prompt: replaces the unconditional logits (§5.1)");
+  add_weights_flag(cmd, Weights::T5, &g->t5, "encodes --text / --negative for a world model trained on its embeddings");
+  cmd->add_option("--text-emb", g->text_emb, "text prompt as embeddings: .npy/.safetensors [m, dim] or [steps, m, dim]")
+      ->excludes("--text");
+  cmd->add_option("--negative-emb", g->negative_emb, "negative prompt as embeddings (as --text-emb)")
+      ->excludes("--negative");
   cmd->add_option("--sampling", g->sampling, "argmax, sample, top-k (default) or top-p");
   cmd->add_option("--top-k", g->top_k, "k for top-k (default: config world.top_k)")->check(key_range("world.top_k"));
   cmd->add_option("--top-p", g->top_p, "p for top-p")->check(number_in({0, 1, true, false}));
@@ -185,12 +191,19 @@ void register_generate(CLI::App& app) {
     const bool commanded = !std::isnan(acts[P][0].item<float>());  // the generated steps have actions
     if (commanded && g->action_negative == "mirror")  // the counter-command: the other way, the prompt's speed
       p.negative_actions = world::counter_actions(acts, P, torch::tensor(last_speed));
-    auto text_rows = [&](const std::string& t) {
-      auto ids = info.vocab.encode(t, L.m);
-      return torch::tensor(ids, torch::kLong).view({1, L.m}).repeat({steps, 1});
-    };
-    if (!g->text.empty()) p.text_ids = text_rows(g->text);
-    if (!g->negative.empty()) p.negative_text_ids = text_rows(g->negative);
+    if (!g->text.empty() || !g->negative.empty()) {
+      auto encoder = world::prompt_encoder(info, g->world, g->t5, dev);
+      if (!g->text.empty()) world::set_prompt_text(p, encoder->encode(g->text, L.m), steps);
+      if (!g->negative.empty()) world::set_prompt_text(p, encoder->encode(g->negative, L.m), steps, true);
+    }
+    for (auto [file, neg] : {std::pair{&g->text_emb, false}, std::pair{&g->negative_emb, true}}) {
+      if (file->empty()) continue;
+      if (!info.embeds_text())
+        fail("{}: reads text with its own words; --text-emb / --negative-emb are for models trained on text "
+             "embeddings", g->world);
+      (neg ? p.negative_text_emb : p.text_emb) = world::read_prompt_embeddings(*file, info, steps);
+    }
+    const bool has_text = p.text_ids.defined() || p.text_emb.defined();
 
     world::RolloutOptions o;
     o.frames = int(F);
@@ -207,10 +220,11 @@ void register_generate(CLI::App& app) {
     o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
     o.guidance.plateau = g->plateau;
     o.guidance.total_frames = int(F);
-    if (o.guidance.active() && !p.actions.defined() && !p.text_ids.defined() && !p.negative_text_ids.defined())
+    if (o.guidance.active() && !p.actions.defined() && !has_text && !p.negative_text_ids.defined() &&
+        !p.negative_text_emb.defined())
       fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
 
-    const int passes = o.guidance.active() ? (p.actions.defined() && p.text_ids.defined() ? 3 : 2) : 1;
+    const int passes = o.guidance.active() ? (p.actions.defined() && has_text ? 3 : 2) : 1;
     sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, preview),
                        fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");

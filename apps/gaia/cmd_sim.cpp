@@ -12,6 +12,7 @@
 #include "episode_prompt.h"
 #include "gaia/core/error.h"
 #include "gaia/sim/hub.h"
+#include "gaia/world/prompt_text.h"
 #include "gaia/sim/server.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
@@ -30,7 +31,7 @@ namespace gaia::app {
 namespace {
 
 struct SimFlags {
-  std::string tokens, world, tokenizer, probe;
+  std::string tokens, world, tokenizer, probe, t5;
   bool stdio = false;
   int max_sessions = 8, max_queue = 4;
   double idle_s = 600;
@@ -48,6 +49,7 @@ void add_sim_flags(CLI::App* cmd, SimFlags* g, SharedFlags* flags) {
   add_weights_flag(cmd, Weights::Probe, &g->probe,
                    "dynamics probe: each step answers what its frames show (read_back: speed, curvature); needs "
                    "--tokenizer");
+  add_weights_flag(cmd, Weights::T5, &g->t5, "encodes text prompts for a world model trained on its embeddings");
   cmd->add_option("--max-sessions", g->max_sessions, "sessions open at once")->check(number_in({1, 1024}));
   cmd->add_option("--max-queue", g->max_queue, "requests that may wait while a session answers another")
       ->check(number_in({0, 1024}));
@@ -159,7 +161,10 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
     };
   }
 #endif
-  sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s}, prompts, frames, read_back);
+  // A model that reads T5 embeddings takes text only through its T5 (sessions without text need none).
+  std::shared_ptr<text::TextEncoder> text;
+  if (!info.embeds_text() || !g.t5.empty()) text = world::prompt_encoder(info, g.world, g.t5, dev);
+  sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s}, prompts, frames, read_back, text);
   serve(hub);
 }
 

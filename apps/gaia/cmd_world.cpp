@@ -12,6 +12,7 @@
 #include "gaia/world/evaluate.h"
 #include "gaia/world/world_eval.h"
 #include "gaia/world/io.h"
+#include "gaia/world/text_embeddings.h"
 #include "gaia/world/token_file.h"
 #include "gaia/world/trainer.h"
 
@@ -64,12 +65,22 @@ void register_world(CLI::App& app) {
     cmd->add_flag("--distill-other-text", o->distill_other_text,
                   "with --distill-from: also keep its text-conditioned predictions when half the batch is given other "
                   "examples' captions (prompts that contradict the frames, as text prompting does); ~1.5x step time");
+    auto t5 = std::make_shared<std::string>();
+    add_weights_flag(cmd, Weights::T5, t5.get(),
+                     "text as its embeddings (§2.1): the captions are embedded first, once (gaia text embed), "
+                     "instead of the built-in words");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     auto par = std::make_shared<ParallelFlags>();
     add_parallel_flags(cmd, par.get());
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       if (flags->out.empty()) fail("gaia world train: --out RUN_DIR is required");
+      // Before any rank starts, so they find the embeddings there; ranks of a job (several machines) check only.
+      if (!t5->empty()) {
+        if (!std::getenv("WORLD_SIZE")) embed_dataset_captions(*tokens, *t5, c.world.text_tokens, parse_device(c.run.device));
+        else if (!fs::exists(fs::path(*tokens) / world::kTextEmbInfoFile))
+          fail("{}: no text embeddings yet: run gaia text embed {} --t5 {} before the job", *tokens, *tokens, *t5);
+      }
       if (launch_local_ranks(*par)) return;
       auto dist = join_job(*par, c);
       world::WorldTrainOptions opt = *o;
@@ -180,9 +191,9 @@ void register_world(CLI::App& app) {
       if (windows.empty())
         fail("{}: no training window of {} steps{}", *tokens, info.config.world.context_steps,
              without->empty() ? "" : " in the episodes without " + fmt::format("{}", fmt::join(*without, ", ")));
-      const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
+      const auto text = world::text_source(info, ds);
       ProgressBar bar(int64_t(windows.size()), "calibrate");
-      auto c = world::calibrate_copy_bias(model, ds, windows, vocab, world::ConditioningMix::from(info.config.world),
+      auto c = world::calibrate_copy_bias(model, ds, windows, text, world::ConditioningMix::from(info.config.world),
                                           info.config.world.batch_size, [&](int64_t d, int64_t) { bar.update(d); });
       bar.finish();
       const double was = info.config.world.copy_bias;

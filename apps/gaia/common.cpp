@@ -59,13 +59,14 @@ void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help
 }
 
 std::string weights_flag_name(Weights which) {
-  static const char* names[] = {"--tokenizer", "--world", "--decoder", "--probe"};
+  static const char* names[] = {"--tokenizer", "--world", "--decoder", "--probe", "--t5"};
   return names[static_cast<int>(which)];
 }
 
 std::string weights_flag_help(Weights which, const std::string& use) {
   static const char* what[] = {"tokenizer weights (tokenizer.safetensors)", "world model weights (world.safetensors)",
-                               "video decoder weights (decoder.safetensors)", "probe weights (probe-KIND.safetensors)"};
+                               "video decoder weights (decoder.safetensors)", "probe weights (probe-KIND.safetensors)",
+                               "frozen T5 text encoder (a Hugging Face folder: config.json, model.safetensors, spiece.model)"};
   const std::string w = what[static_cast<int>(which)];
   return use.empty() ? w : w + ": " + use;
 }

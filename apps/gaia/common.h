@@ -39,7 +39,7 @@ void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help
 
 // The CLI's one rule: data positional, weights by component. Each component's weights flag is declared here, with
 // one name and one help text; `use` adds what this command does with them (e.g. "decodes the preview").
-enum class Weights { Tokenizer, World, Decoder, Probe };
+enum class Weights { Tokenizer, World, Decoder, Probe, T5 };
 std::string weights_flag_name(Weights which);                           // "--tokenizer", ...
 std::string weights_flag_help(Weights which, const std::string& use);  // "tokenizer weights (tokenizer.safetensors): USE"
 template <typename Path>  // std::string or fs::path
@@ -154,5 +154,8 @@ void register_eval(CLI::App& app);      // gaia eval (action / text control, fut
 void register_train_all(CLI::App& app); // gaia train-all (the whole recipe)
 void register_report(CLI::App& app);    // gaia report RUN_DIR
 void register_sim(CLI::App& app);       // gaia sim --stdio (closed-loop sessions)
+void register_text(CLI::App& app);      // gaia text embed (T5 embeddings of a dataset's captions)
+// A token dataset's captions through the T5 at `t5` into its text embeddings (world/embed_captions.h), with progress.
+void embed_dataset_captions(const std::string& tokens, const std::string& t5, int64_t m, const torch::Device& dev);
 
 }  // namespace gaia::app

@@ -88,9 +88,10 @@ struct Fields {
 }  // namespace
 
 SessionHub::SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits,
-                       PromptSource prompts, FrameEncoder frames, ReadBack read_back)
+                       PromptSource prompts, FrameEncoder frames, ReadBack read_back,
+                       std::shared_ptr<text::TextEncoder> text)
     : model_(model), info_(info), limits_(limits), prompts_(std::move(prompts)), frames_(std::move(frames)),
-      read_back_(std::move(read_back)) {}
+      read_back_(std::move(read_back)), text_(std::move(text)) {}
 
 size_t SessionHub::sessions() const {
   std::lock_guard<std::mutex> g(lock_);
@@ -142,7 +143,7 @@ HubReply SessionHub::create(const json& r) {
     else if (prompts_) p = prompts_(q);
     else fail("this server has no token dataset to take a prompt from: give the prompt's \"tokens\"");
   }
-  auto session = std::make_unique<SimSession>(model_, info_, s);
+  auto session = std::make_unique<SimSession>(model_, info_, s, text_);
   session->start(p.tokens, p.actions, f.text("text", ""));
   json body{{"prompt_frames", session->prompt_frames()}};
   return add(std::move(session), body);

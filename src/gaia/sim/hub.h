@@ -47,8 +47,9 @@ struct ReadBack {
 
 class SessionHub {
  public:
+  // `text`: the sessions' text encoder (SimSession; shared by all, so it must be thread-safe).
   SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits, PromptSource prompts,
-             FrameEncoder frames = {}, ReadBack read_back = {});
+             FrameEncoder frames = {}, ReadBack read_back = {}, std::shared_ptr<text::TextEncoder> text = {});
   // op: create | step | command | drive | fork | reset | close | status. "command" sets a session's standing action
   // (answered at once, even while it steps) and "drive" steps it with that: continuous driving, as the stream does.
   HubReply handle(const std::string& op, const nlohmann::json& request);
@@ -69,6 +70,7 @@ class SessionHub {
   PromptSource prompts_;
   FrameEncoder frames_;
   ReadBack read_back_;
+  std::shared_ptr<text::TextEncoder> text_;
   mutable std::mutex lock_;  // the map and the queue counts
   std::map<int64_t, std::shared_ptr<Entry>> sessions_;
   int64_t next_id_ = 1;

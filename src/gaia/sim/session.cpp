@@ -3,6 +3,7 @@
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/prompt_text.h"
 
 namespace gaia::sim {
 
@@ -15,8 +16,10 @@ torch::Tensor append(const torch::Tensor& rows, const torch::Tensor& row) {
 }
 }  // namespace
 
-SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s)
-    : model_(&model), info_(&info), mirror_(s.mirror_negative) {
+SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s,
+                       std::shared_ptr<text::TextEncoder> text)
+    : model_(&model), info_(&info), mirror_(s.mirror_negative), encoder_(std::move(text)) {
+  if (!encoder_ && !info.embeds_text()) encoder_ = std::make_shared<text::WordEncoder>(info.vocab);
   const auto& w = info.config.world;
   o_.seed = s.seed;
   o_.window_stride = s.window_stride;
@@ -32,8 +35,13 @@ SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, c
 }
 
 torch::Tensor SimSession::text_row(const std::string& text) const {
-  return torch::tensor(info_->vocab.encode(text, (*model_)->layout.m), torch::kLong);
+  if (!encoder_)
+    fail("this world model reads text as embeddings of {}: text prompts need that encoder (gaia sim --t5 DIR)",
+         info_->text_encoder);
+  return encoder_->encode(text, (*model_)->layout.m);
 }
+
+torch::Tensor& SimSession::text_rows() { return info_->embeds_text() ? cond_.text_emb : cond_.text_ids; }
 
 void SimSession::start(const torch::Tensor& tokens, const torch::Tensor& actions, const std::string& text) {
   const auto& L = (*model_)->layout;
@@ -69,7 +77,9 @@ void SimSession::reset() {
   cond_.actions = acts;
   // The counter-command (world::counter_actions) leaves the prompt's own actions as they are.
   if (mirror_) cond_.negative_actions = acts.clone();
-  if (!text_.empty()) cond_.text_ids = text_row(text_).unsqueeze(0).repeat({P_, 1});
+  if (!text_.empty()) {
+    text_rows() = world::repeat_rows(text_row(text_), P_);
+  }
   stepper_.emplace(*model_, o_, 1);
   for (int64_t k = 0; k < P_; ++k) stepper_->step(cond_, prompt_tokens_[k]);
 }
@@ -93,17 +103,19 @@ void SimSession::append_row(const Action& a) {
                          : torch::tensor({float(kNaN), float(kNaN)});
     cond_.negative_actions = append(cond_.negative_actions, neg);
   }
-  if (!text_.empty() || cond_.text_ids.defined()) {
+  torch::Tensor& rows = text_rows();
+  if (!text_.empty() || rows.defined()) {
     // Text given after steps without any: those steps read as the empty caption from now on.
     const int64_t k = cond_.actions.size(0) - 1;
-    if (!cond_.text_ids.defined()) cond_.text_ids = text_row("").unsqueeze(0).repeat({k, 1});
-    cond_.text_ids = append(cond_.text_ids, text_row(text_));
+    if (!rows.defined()) rows = world::repeat_rows(text_row(""), k);
+    rows = append(rows, text_row(text_));
   }
 }
 
 torch::Tensor SimSession::step(const Action& a, const std::optional<std::string>& text) {
   if (!stepper_) fail("a session steps after start()");
   check_action(a);
+  if (text && !text->empty()) text_row(*text);  // a text this session cannot encode fails before anything changes
   if (text) text_ = *text;
   append_row(a);
   return stepper_->step(cond_).reshape({-1}).to(torch::kCPU);

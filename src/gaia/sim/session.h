@@ -13,6 +13,7 @@
 
 #include <torch/torch.h>
 
+#include "gaia/text/encoder.h"
 #include "gaia/world/io.h"
 #include "gaia/world/rollout.h"
 
@@ -41,8 +42,10 @@ void check_action(const Action& a);
 
 class SimSession {
  public:
-  // `model` outlives the session (sessions of one model share its weights).
-  SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s);
+  // `model` outlives the session (sessions of one model share its weights). `text` encodes text prompts
+  // (world/prompt_text.h); undefined = the model's own words, and for a model that reads embeddings, no text.
+  SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s,
+             std::shared_ptr<text::TextEncoder> text = {});
 
   // The video prompt: `tokens` [P, n] (P may be 0: from nothing), their actions [P, 2] in m/s and 1/m (NaN where
   // unknown; undefined = none) and a text prompt ("" = none). P must leave room for a generated step in the context.
@@ -63,6 +66,7 @@ class SimSession {
   const world::WorldInfo* info_;
   world::RolloutOptions o_;
   bool mirror_;
+  std::shared_ptr<text::TextEncoder> encoder_;
   // Per-step conditioning, one row per step so far (+1 while stepping), as rollout() reads it.
   world::RolloutPrompt cond_;
   torch::Tensor prompt_tokens_, prompt_actions_;  // start()'s arguments, for reset()
@@ -72,7 +76,8 @@ class SimSession {
   std::optional<world::RolloutStepper> stepper_;
 
   void append_row(const Action& a);
-  torch::Tensor text_row(const std::string& text) const;
+  torch::Tensor text_row(const std::string& text) const;  // [m] word ids or [m, dim] embeddings
+  torch::Tensor& text_rows();                             // cond_'s text field of that kind
 };
 
 }  // namespace gaia::sim

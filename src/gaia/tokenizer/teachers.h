@@ -4,7 +4,8 @@
 //    (Johnson et al. 2016). Channel widths are read from the file, so a width-reduced VGG16 fixture runs the same code.
 //  - a DINO ViT (timm layout: patch_embed.proj, cls_token, pos_embed, blocks.N.{norm1,attn.qkv,attn.proj,norm2,
 //    mlp.fc1,mlp.fc2}, norm), or torchvision's VisionTransformer layout (mapped on load), for the inductive-bias loss.
-// Missing teacher files switch the corresponding loss off; the trainer logs that plainly.
+// A teacher not given switches the corresponding loss off and the trainer logs that plainly; a teacher file that is
+// named but missing or in another layout is an error naming it.
 #include <torch/torch.h>
 
 #include "gaia/core/fs.h"

@@ -60,6 +60,21 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   // Weights, gradients and AdamW's two moments in float32 (tokenizer and discriminator), before any is allocated.
   sizing::check_memory(16.0 * double(sizing::tokenizer_params(cfg).total + sizing::discriminator_params(cfg)),
                      "training this tokenizer (tokenizer.*)");
+  // Teachers: real weights or the loss is off, never a stand-in. A file the caller names must exist: a mistyped
+  // --vgg / --dino is an error naming it (before the run directory is touched), not a run without that loss.
+  std::unique_ptr<Vgg16> vgg;
+  std::unique_ptr<DinoViT> dino;
+  if (!opt.vgg.empty()) vgg = std::make_unique<Vgg16>(opt.vgg);  // throws naming a missing or mismatched file
+  else note("no VGG16 teacher given (--vgg): perceptual loss off");
+  if (opt.decoder_only) {
+    if (!opt.dino.empty()) {
+      if (!fs::exists(opt.dino)) fail("{}: no such DINO ViT weights file", opt.dino.string());
+      note("--decoder-only: the codes are frozen, DINO distillation loss off (teacher not loaded)");
+    }
+  } else if (!opt.dino.empty()) dino = std::make_unique<DinoViT>(opt.dino);
+  else note("no DINO teacher given (--dino): DINO distillation loss off");
+  if (vgg) (*vgg)->to(dev);
+  if (dino) (*dino)->to(dev);
   // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
   const auto run_dir = train::claim_run_dir(opt.out, dist, note);
 
@@ -74,20 +89,6 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   if (!val_eps.empty())
     val = std::make_unique<data::FrameSampler>(ds, val_eps, cfg.data.height, cfg.data.width, std::vector<std::string>{}, 0.0, 1);
   else note("no validation episodes (dataset too small): validation skipped");
-
-  // Teachers: real weights or the loss is off, never a stand-in.
-  std::unique_ptr<Vgg16> vgg;
-  std::unique_ptr<DinoViT> dino;
-  if (!opt.vgg.empty() && fs::exists(opt.vgg)) vgg = std::make_unique<Vgg16>(opt.vgg);
-  else note(opt.vgg.empty() ? "no VGG16 teacher given (--vgg): perceptual loss off"
-                            : "VGG16 teacher " + opt.vgg.string() + " not found: perceptual loss off");
-  if (opt.decoder_only) {
-    if (!opt.dino.empty()) note("--decoder-only: the codes are frozen, DINO distillation loss off (teacher not loaded)");
-  } else if (!opt.dino.empty() && fs::exists(opt.dino)) dino = std::make_unique<DinoViT>(opt.dino);
-  else note(opt.dino.empty() ? "no DINO teacher given (--dino): DINO distillation loss off"
-                             : "DINO teacher " + opt.dino.string() + " not found: DINO distillation loss off");
-  if (vgg) (*vgg)->to(dev);
-  if (dino) (*dino)->to(dev);
 
   torch::manual_seed(cfg.run.seed);
   ImageTokenizer model(cfg, dino ? (*dino)->dim : 0);

@@ -15,7 +15,7 @@ namespace gaia::tokenizer {
 
 struct TrainOptions {
   fs::path dataset, out;          // OUT/checkpoint/ (resumable), OUT/tokenizer.safetensors, OUT/metrics.jsonl
-  fs::path vgg, dino;             // teacher weights; empty or missing = that loss is off (logged)
+  fs::path vgg, dino;             // teacher weights; empty = that loss is off (logged); a missing file is an error
   fs::path init;                  // start from these tokenizer weights (fine-tuning); ignored when resuming
   int steps = -1;                 // -1: config tokenizer.steps
   int val_every = 250;            // steps between validations

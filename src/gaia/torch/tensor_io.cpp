@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "gaia/core/error.h"
+#include "gaia/core/npy.h"
 
 namespace gaia {
 
@@ -75,6 +76,29 @@ torch::Tensor tensor_from_view(const TensorView& v) {
   std::vector<int64_t> shape(v.shape.begin(), v.shape.end());
   auto t = torch::empty(shape, torch::TensorOptions().dtype(to_torch(v.dtype)));
   if (v.nbytes) std::memcpy(t.data_ptr(), v.data, v.nbytes);
+  return t;
+}
+
+torch::Tensor read_float_array(const fs::path& file, const std::string& name) {
+  if (!fs::exists(file)) fail("{}: no such file", file.string());
+  torch::Tensor t;
+  const std::string ext = file.extension().string();
+  if (ext == ".npy") {
+    NpyArray a = npy_read(file);
+    t = torch::empty(a.shape, torch::TensorOptions().dtype(to_torch(a.dtype)));
+    if (!a.bytes.empty()) std::memcpy(t.data_ptr(), a.bytes.data(), a.bytes.size());
+  } else if (ext == ".safetensors") {
+    SafetensorsFile f(file);
+    auto names = f.names();
+    if (!f.contains(name) && names.size() != 1)
+      fail("{}: holds {} tensors and none named '{}'", file.string(), names.size(), name);
+    t = tensor_from_view(f.get(f.contains(name) ? name : names[0]));
+  } else {
+    fail("{}: not a .npy or .safetensors file", file.string());
+  }
+  if (!t.is_floating_point()) fail("{}: holds {} values; want floats", file.string(), c10::toString(t.scalar_type()));
+  t = t.to(torch::kFloat32);
+  if (!torch::isfinite(t).all().item<bool>()) fail("{}: contains NaN or infinity", file.string());
   return t;
 }
 

@@ -26,6 +26,10 @@ void configure_allocator();
 // Copies a tensor out of a (mapped) safetensors view.
 torch::Tensor tensor_from_view(const TensorView& v);
 
+// The float array of a .npy file, or of a .safetensors file's tensor `name` (or its only tensor when `name` is
+// not in it), as float32 on the CPU. Errors name the file: not found, not a float array, NaN or infinity.
+torch::Tensor read_float_array(const fs::path& file, const std::string& name);
+
 // All parameters and buffers of a module by their dotted names ("encoder.conv_in.weight").
 std::map<std::string, torch::Tensor> state_dict(const torch::nn::Module& m);
 

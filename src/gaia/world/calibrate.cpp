@@ -31,7 +31,7 @@ double fit_copy_bias(const torch::Tensor& log_p_copy, const torch::Tensor& copie
 }
 
 CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
-                                    const text::Vocab* vocab, const ConditioningMix& mix, int64_t batch,
+                                    const TextSource& text, const ConditioningMix& mix, int64_t batch,
                                     const std::function<void(int64_t, int64_t)>& progress) {
   torch::NoGradGuard ng;
   model->eval();
@@ -41,7 +41,7 @@ CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, c
   const double b0 = model->cfg.copy_bias;
   std::vector<torch::Tensor> logp_copy, logp_true, copied;
   for (size_t w0 = 0; w0 < windows.size(); w0 += size_t(batch)) {
-    WorldBatch b = batch_at(ds, windows, w0, batch, vocab, model->layout.m, mix).to(dev);  // the same fit every time
+    WorldBatch b = batch_at(ds, windows, w0, batch, text, model->layout.m, mix).to(dev);  // the same fit every time
     auto lp = torch::log_softmax(model->forward(b).slice(1, 1).to(torch::kFloat), -1);  // [B, T-1, n, K]
     auto tok = b.tokens.to(torch::kLong);
     auto prev = tok.slice(1, 0, -1).unsqueeze(-1), cur = tok.slice(1, 1).unsqueeze(-1);

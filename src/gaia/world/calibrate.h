@@ -32,7 +32,7 @@ struct CopyCalibration {
 // Teacher-forced logits of `windows` (conditioning drawn with `mix`, as in training), then fit_copy_bias. The model's
 // own copy_bias is the starting point, so calibrating twice changes nothing. The model is not modified.
 CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
-                                    const text::Vocab* vocab, const ConditioningMix& mix, int64_t batch,
+                                    const TextSource& text, const ConditioningMix& mix, int64_t batch,
                                     const std::function<void(int64_t, int64_t)>& progress = {});
 
 }  // namespace gaia::world

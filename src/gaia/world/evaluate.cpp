@@ -28,13 +28,26 @@ torch::Tensor token_nll(const torch::Tensor& logits, const torch::Tensor& tokens
 }  // namespace
 
 WorldBatch batch_at(const TokenDataset& ds, const std::vector<Window>& windows, size_t b0, int64_t batch,
-                    const text::Vocab* vocab, int64_t m, const ConditioningMix& mix) {
+                    const TextSource& text, int64_t m, const ConditioningMix& mix) {
   std::vector<Window> ws(windows.begin() + long(b0), windows.begin() + long(std::min(windows.size(), b0 + size_t(batch))));
   std::mt19937_64 rng(b0);
-  return ds.make_batch(ws, vocab, m, mix, rng);
+  return ds.make_batch(ws, text, m, mix, rng);
 }
 
-Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
+TextSource text_source(const WorldInfo& info, const TokenDataset& ds) {
+  if (!info.embeds_text()) return TextSource(ds.has_captions() ? &info.vocab : nullptr);
+  const TextEmbInfo& e = ds.text_emb();
+  if (!ds.has_text_emb())
+    fail("{}: has no text embeddings, and the world model reads text as embeddings of {} (gaia text embed)",
+         ds.path().string(), info.text_encoder);
+  if (e.encoder != info.text_encoder || e.m != info.config.world.text_tokens || e.dim != info.config.world.text_dim)
+    fail("{}: text embeddings of {} [m = {}, dim = {}], but the world model reads {} [m = {}, dim = {}]",
+         ds.path().string(), e.encoder, e.m, e.dim, info.text_encoder, info.config.world.text_tokens,
+         info.config.world.text_dim);
+  return TextSource::precomputed();
+}
+
+Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const TextSource& text,
             const ScoreOptions& o) {
   torch::NoGradGuard ng;
   model->eval();
@@ -46,13 +59,13 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
   const auto mix = only(o.mode);
   const size_t W = windows.size();
   for (size_t b0 = 0; b0 < W; b0 += static_cast<size_t>(o.batch)) {
-    WorldBatch batch = batch_at(ds, windows, b0, o.batch, vocab, model->layout.m, mix);
+    WorldBatch batch = batch_at(ds, windows, b0, o.batch, text, model->layout.m, mix);
     if (o.shuffle && W > 1) {
       // Conditioning from the window half the set away: a fixed derangement that pairs unrelated episodes.
       std::vector<Window> other;
       for (size_t i = b0; i < b0 + size_t(batch.batch()); ++i) other.push_back(windows[(i + W / 2) % W]);
       std::mt19937_64 rng2(b0);
-      WorldBatch c = ds.make_batch(other, vocab, model->layout.m, mix, rng2);
+      WorldBatch c = ds.make_batch(other, text, model->layout.m, mix, rng2);
       batch.actions = c.actions;
       batch.text_ids = c.text_ids;
       batch.text_emb = c.text_emb;

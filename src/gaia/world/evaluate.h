@@ -6,6 +6,7 @@
 
 #include <optional>
 
+#include "gaia/world/io.h"
 #include "gaia/world/model.h"
 #include "gaia/world/sampling.h"
 #include "gaia/world/token_dataset.h"
@@ -15,7 +16,11 @@ namespace gaia::world {
 // Windows [b0, b0 + batch) of `windows` -> their batch, with the conditioning mode drawn from rng(b0) (fixed, so a
 // window is conditioned the same way in every call).
 WorldBatch batch_at(const TokenDataset& ds, const std::vector<Window>& windows, size_t b0, int64_t batch,
-                    const text::Vocab* vocab, int64_t m, const ConditioningMix& mix);
+                    const TextSource& text, int64_t m, const ConditioningMix& mix);
+
+// How the model reads the dataset's text: its built-in words (when the dataset has captions), or the dataset's
+// embeddings, which must come from the encoder the model was trained with (errors name both).
+TextSource text_source(const WorldInfo& info, const TokenDataset& ds);
 
 struct ScoreOptions {
   Conditioning mode = Conditioning::kAction;
@@ -30,7 +35,7 @@ struct Score {
   int64_t tokens = 0;                 // image tokens scored
 };
 
-Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const text::Vocab* vocab,
+Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const TextSource& text,
             const ScoreOptions& o);
 
 // Fig. 5: what a sampling strategy generates, scored like real tokens. The last frame of each window is generated

@@ -12,6 +12,7 @@ void save_world(WorldModel& m, const WorldInfo& info, const fs::path& path) {
   std::map<std::string, std::string> md{{"gaia.component", "world"}, {"gaia.config", c.to_yaml()},
                                         {"gaia.grid", grid.dump()}, {"gaia.vocab", info.vocab.to_json().dump()}};
   if (info.action_share >= 0) md["gaia.action_share"] = fmt::format("{}", info.action_share);
+  if (info.embeds_text()) md["gaia.text_encoder"] = info.text_encoder;
   save_module(*m, path, md);
 }
 
@@ -30,6 +31,7 @@ WorldModel load_world(const fs::path& path, const torch::Device& device, WorldIn
       info.grid_w = g.at("w").get<int64_t>();
       info.K = g.at("K").get<int64_t>();
       info.vocab = text::Vocab::from_json(nlohmann::json::parse(md.at("gaia.vocab")), path.string() + " [gaia.vocab]");
+      if (md.count("gaia.text_encoder")) info.text_encoder = md.at("gaia.text_encoder");
       if (md.count("gaia.action_share")) {
         const double a = std::stod(md.at("gaia.action_share"));
         if (!(a >= 0 && a <= 1)) fail("{}: gaia.action_share must be in [0, 1], got {}", path.string(), a);

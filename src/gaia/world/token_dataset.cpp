@@ -153,6 +153,20 @@ TokenDataset::TokenDataset(const fs::path& path, const TokenFormat& format, size
     has_captions_ = has_captions_ || fs::exists(dir / "captions.jsonl");
     info_.push_back(std::move(info));
   }
+  // Text embeddings come for every episode or for none, so no batch mixes embedded and missing text.
+  size_t with = 0;
+  for (size_t e = 0; e < ids_.size(); ++e) with += !text_emb_file(episode_dir(e)).empty();
+  if (fs::exists(path / kTextEmbPartialFile)) {
+    // gaia text embed is writing them (or was interrupted): none until it finishes.
+  } else if (with > 0) {
+    for (size_t e = 0; e < ids_.size(); ++e)
+      if (text_emb_file(episode_dir(e)).empty())
+        fail("{}: no text_emb.npy, but {} of the {} episodes have text embeddings (all or none; docs/formats.md)",
+             episode_dir(e).string(), with, ids_.size());
+    text_emb_ = probe_text_emb_info(path, text_emb_file(episode_dir(0)));
+  } else if (fs::exists(path / kTextEmbInfoFile)) {
+    fail("{}: describes text embeddings, but no episode has a text_emb.npy", (path / kTextEmbInfoFile).string());
+  }
 }
 
 void TokenDataset::open_file(const TokenFormat& stated) {
@@ -266,6 +280,7 @@ std::shared_ptr<const TokenEpisode> TokenDataset::load(size_t e) const {
     if (static_cast<int64_t>(ep->captions.size()) != T)
       fail("{}: has {} captions, episode.json says {} steps", cf.string(), ep->captions.size(), T);
   }
+  if (has_text_emb()) ep->text_emb = read_text_embeddings(text_emb_file(dir), T, text_emb_);
   return ep;
 }
 
@@ -330,15 +345,23 @@ data::FeatureRow TokenDataset::features(const Window& w) const {
   return data::example_features(meta(w.episode), v, k);
 }
 
-WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const text::Vocab* vocab, int64_t m,
+WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const TextSource& source, int64_t m,
                                     const ConditioningMix& mix, std::mt19937_64& rng) const {
   if (windows.empty()) fail("{}: a batch needs at least one window", path_.string());
   const int64_t B = static_cast<int64_t>(windows.size()), T = windows[0].steps, n = tokens_per_step();
+  const text::Vocab* vocab = source.embeddings ? nullptr : source.vocab;
   const bool text = vocab && has_captions_;
   if (text && m < 1) fail("text tokens per step (world.text_tokens) must be >= 1, got {}", m);
+  if (source.embeddings && !has_text_emb())
+    fail("{}: has no text embeddings (text_emb.npy per episode; gaia text embed makes them)", path_.string());
+  if (source.embeddings && m != text_emb_.m)
+    fail("{}: text embeddings have m = {} tokens a step, but {} were asked for (world.text_tokens)", path_.string(),
+         text_emb_.m, m);
+  const int64_t row = source.embeddings ? text_emb_.m * text_emb_.dim : 0;
   auto tokens = torch::empty({B, T, n}, torch::kInt64);
   auto act = torch::empty({B, T, 2}, torch::kFloat32);
   auto text_ids = text ? torch::zeros({B, T, m}, torch::kInt64) : torch::Tensor();
+  auto text_emb = source.embeddings ? torch::empty({B, T, text_emb_.m, text_emb_.dim}) : torch::Tensor();
   auto use_action = torch::empty({B}, torch::kBool), use_text = torch::empty({B}, torch::kBool);
   int64_t* tp = tokens.data_ptr<int64_t>();
   float* ap = act.data_ptr<float>();
@@ -362,6 +385,9 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const te
         auto ids = vocab->encode(ep->captions[static_cast<size_t>(w.start + t)], m);
         std::copy(ids.begin(), ids.end(), text_ids.data_ptr<int64_t>() + (b * T + t) * m);
       }
+    if (source.embeddings)
+      for (int64_t t = 0; t < T; ++t)
+        std::copy_n(ep->text_emb.step(w.start + t), row, text_emb.data_ptr<float>() + (b * T + t) * row);
     Conditioning c = mix.draw(rng, meta(w.episode).is_replay());
     ua[b] = c == Conditioning::kAction;
     ut[b] = c == Conditioning::kText;
@@ -370,6 +396,7 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const te
   out.tokens = tokens;
   out.actions = act;
   out.text_ids = text_ids;
+  out.text_emb = text_emb;
   out.use_action = use_action;
   out.use_text = use_text;
   return out;
@@ -404,11 +431,11 @@ text::Vocab build_vocab(const TokenDataset& ds, const std::vector<size_t>& episo
   return text::Vocab::from_counts(counts, max_size);
 }
 
-WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, const text::Vocab* vocab,
+WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, const TextSource& text,
                           const WorldConfig& cfg, uint64_t seed, int step) {
   std::mt19937_64 rng(train::step_seed(seed, step, kBatchStream));
   auto windows = sampler.sample(cfg.batch_size, rng);
-  return ds.make_batch(windows, vocab, cfg.text_tokens, ConditioningMix::from(cfg), rng);
+  return ds.make_batch(windows, text, cfg.text_tokens, ConditioningMix::from(cfg), rng);
 }
 
 size_t TokenDataset::find(const std::string& id) const {

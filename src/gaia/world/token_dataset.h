@@ -3,14 +3,16 @@
 // "Token dataset"), cut into windows of T consecutive steps, drawn with the §3 balancing, and turned into
 // WorldBatch examples that are unconditional, action- or text-conditioned in the §4.2 ratios (20/40/40).
 //
-//   TokenDataset   TOKENS/ (dataset.json, episodes/<id>/{tokens.npy, actions.npy, captions.jsonl, episode.json});
+//   TokenDataset   TOKENS/ (dataset.json, episodes/<id>/{tokens.npy, actions.npy, captions.jsonl, episode.json},
+//                  text embeddings where given: text_embeddings.h);
 //                  or token files of another tokenizer (token_file.h), without actions or text, with metadata
 //                  from a sidecar X.json where given: one file = one drive split in time (the last val_fraction
 //                  held out), a directory of them = one episode a file, held out by file (or by its split.json,
 //                  which `gaia data split --geofence` writes from the sidecars' positions)
 //   Window         steps [start, start + steps) of one episode; never crosses episodes
 //   WindowSampler  uniform or balanced (data::Balancer over weather, time of day, location, steering, speed)
-//   make_batch     windows -> tokens [B,T,n], actions [B,T,2] (normalised), text_ids [B,T,m], use_action/use_text
+//   make_batch     windows -> tokens [B,T,n], actions [B,T,2] (normalised), text_ids [B,T,m] or text_emb
+//                  [B,T,m,dim], use_action/use_text
 //
 // Memory: every episode's metadata and actions (8 bytes a step) are read at open, because balancing needs the
 // features of every window. Tokens and captions are read when an episode is first used, checked (shape, ids in
@@ -31,6 +33,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/text/vocab.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/text_embeddings.h"
 #include "gaia/world/token_file.h"
 
 namespace gaia::world {
@@ -59,6 +62,21 @@ struct ConditioningMix {
 struct TokenEpisode {
   std::vector<int32_t> tokens;        // [steps, h, w] row-major, every id in [0, K)
   std::vector<std::string> captions;  // [steps] ("" = none), or empty when the dataset has no captions
+  TextEmbeddings text_emb;            // precomputed embeddings of the captions, or empty (m = 0)
+};
+
+// How a batch carries text (§2.1): word ids of the built-in vocabulary, or the dataset's precomputed embeddings
+// (the world model's text_dim wide), or none. A vocabulary pointer converts: nullptr = no text.
+struct TextSource {
+  const text::Vocab* vocab = nullptr;
+  bool embeddings = false;
+  TextSource(const text::Vocab* v = nullptr) : vocab(v) {}  // NOLINT: implicit, words or nothing
+  static TextSource precomputed() {
+    TextSource s;
+    s.embeddings = true;
+    return s;
+  }
+  bool any() const { return vocab || embeddings; }
 };
 
 class TokenDataset {
@@ -78,6 +96,9 @@ class TokenDataset {
   int64_t codebook_size() const { return K_; }          // K
   double rate_hz() const { return rate_hz_; }           // dataset.json "rate_hz" (6.25, §2.3); 0 when unknown
   bool has_captions() const { return has_captions_; }
+  // Precomputed text embeddings of every episode (text_embeddings.h): who made them, m and dim; undefined = none.
+  const TextEmbInfo& text_emb() const { return text_emb_; }
+  bool has_text_emb() const { return text_emb_.defined(); }
 
   size_t size() const { return ids_.size(); }  // episodes
   const std::vector<std::string>& ids() const { return ids_; }
@@ -103,10 +124,11 @@ class TokenDataset {
   data::FeatureRow features(const Window& w) const;
 
   // The batch of these windows (all of the same length T): tokens [B,T,n] int64, actions [B,T,2] float32 divided
-  // by kSpeedScale / kCurvatureScale (NaN kept), text_ids [B,T,m] via `vocab` (undefined without vocab or
-  // captions), and one conditioning mode per example drawn from `mix` with `rng` (use_action / use_text; windows of
-  // counterfactual replays draw with ConditioningMix::p_action_replay).
-  WorldBatch make_batch(const std::vector<Window>& windows, const text::Vocab* vocab, int64_t m,
+  // by kSpeedScale / kCurvatureScale (NaN kept), text as `text` says: text_ids [B,T,m] via its vocabulary
+  // (undefined without captions), or text_emb [B,T,m,dim] (the dataset's embeddings; m must be theirs); and one
+  // conditioning mode per example drawn from `mix` with `rng` (use_action / use_text; windows of counterfactual
+  // replays draw with ConditioningMix::p_action_replay).
+  WorldBatch make_batch(const std::vector<Window>& windows, const TextSource& text, int64_t m,
                         const ConditioningMix& mix, std::mt19937_64& rng) const;
 
  private:
@@ -128,6 +150,7 @@ class TokenDataset {
   int64_t h_ = 0, w_ = 0, K_ = 0;
   double rate_hz_ = 0;
   bool has_captions_ = false;
+  TextEmbInfo text_emb_;
   std::vector<std::string> ids_;
   std::vector<Info> info_;
   std::vector<std::shared_ptr<const TokenEpisode>> preloaded_;  // one file: its training part and held-out end
@@ -165,7 +188,7 @@ inline constexpr uint64_t kBatchStream = 0;
 // Training batch number `step`: cfg.world.batch_size windows from the sampler, then make_batch with the config's
 // m and conditioning mix, all drawn from std::mt19937_64(train::step_seed(seed, step, kBatchStream)), so a
 // resumed run sees exactly the batches of an uninterrupted one.
-WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, const text::Vocab* vocab,
+WorldBatch training_batch(const TokenDataset& ds, const WindowSampler& sampler, const TextSource& text,
                           const WorldConfig& cfg, uint64_t seed, int step);
 
 }  // namespace gaia::world

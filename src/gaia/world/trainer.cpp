@@ -44,9 +44,10 @@ std::vector<torch::Tensor> trained_parameters(torch::nn::Module& model, const st
 
 }  // namespace
 
-WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
+WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
                              const std::function<void(const WorldStepLog&)>& on_step,
                              const std::function<void(const std::string&)>& on_note) {
+  Config cfg = config;  // text embeddings of the dataset set world.text_tokens and world.text_dim (below)
   const auto& wc = cfg.world;
   const torch::Device dev = parse_device(cfg.run.device);
   WorldTrainResult result;
@@ -89,10 +90,31 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       fail("{}: a {}x{} token grid with K = {}, but {} has {}x{} with K = {}", opt.init.string(), init_info.grid_h,
            init_info.grid_w, init_info.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
   }
+  // Text (§2.1): the dataset's precomputed embeddings where it has them (a fine-tune keeps its --init model's kind
+  // of text), else the built-in words.
+  const bool embeddings = init ? init_info.embeds_text() : ds.has_text_emb();
   text::Vocab vocab;
-  if (init) vocab = init_info.vocab;
-  else if (ds.has_captions()) vocab = build_vocab(ds, train_eps, wc.text_vocab);
-  if (!ds.has_captions()) note("no captions in the token dataset: text conditioning uses the null text only");
+  if (embeddings) {
+    const TextEmbInfo& e = ds.text_emb();
+    if (!ds.has_text_emb())
+      fail("{}: was trained on text embeddings of {}, but {} has none (gaia text embed)", opt.init.string(),
+           init_info.text_encoder, opt.tokens.string());
+    if (init && init_info.text_encoder != e.encoder)
+      fail("{}: was trained on text embeddings of {}, but {} has embeddings of {}", opt.init.string(),
+           init_info.text_encoder, opt.tokens.string(), e.encoder);
+    if (wc.text_tokens != e.m || wc.text_dim != e.dim)
+      note(fmt::format("text: {}'s embeddings of {} set world.text_tokens = {} and world.text_dim = {} (config: {}, {})",
+                       opt.tokens.string(), e.encoder, e.m, e.dim, wc.text_tokens, wc.text_dim));
+    cfg.world.text_tokens = int(e.m);
+    cfg.world.text_dim = int(e.dim);
+  } else if (init) {
+    vocab = init_info.vocab;
+    if (ds.has_text_emb()) note(fmt::format("text: {} was trained on words; the dataset's embeddings are not used", opt.init.string()));
+  } else if (ds.has_captions()) {
+    vocab = build_vocab(ds, train_eps, wc.text_vocab);
+  }
+  const TextSource text = embeddings ? TextSource::precomputed() : TextSource(ds.has_captions() ? &vocab : nullptr);
+  if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
 
@@ -104,6 +126,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
+  if (embeddings) info.text_encoder = ds.text_emb().encoder;
   {
     int64_t steps = 0, with = 0;
     for (size_t e : train_eps) {
@@ -145,7 +168,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
     if (ti.grid_h != ds.grid_h() || ti.grid_w != ds.grid_w() || ti.K != ds.codebook_size())
       fail("{}: a {}x{} token grid with K = {}, but {} has {}x{} with K = {}", opt.distill_from.string(), ti.grid_h,
            ti.grid_w, ti.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
-    if (!(ti.vocab == vocab))
+    if (!(ti.vocab == vocab) || ti.text_encoder != info.text_encoder)
       fail("{}: its text vocabulary differs from this run's (distil from the --init weights, or weights with their "
            "vocabulary)", opt.distill_from.string());
     // Its prediction as the run's model would make it: the same copy logit (a calibrated teacher carries its own).
@@ -197,7 +220,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
       ScoreOptions so;
       so.mode = mode;
       so.batch = wc.batch_size;
-      auto s = score(model, ds, val_windows, ds.has_captions() ? &vocab : nullptr, so);
+      auto s = score(model, ds, val_windows, text, so);
       v[name] = s.nats;
     }
     v["bits_per_token"] = v["action"].get<double>() / std::log(2.0);
@@ -219,7 +242,7 @@ WorldTrainResult train_world(const Config& cfg, const WorldTrainOptions& opt,
   while (step < total) {
     auto t0 = std::chrono::steady_clock::now();
     // The whole step's batch on every rank; each takes its own micro-batches of it.
-    auto whole = training_batch(ds, sampler, ds.has_captions() ? &vocab : nullptr, wc, cfg.run.seed, step);
+    auto whole = training_batch(ds, sampler, text, wc, cfg.run.seed, step);
     const double lr = sched(step);
     optim.set_lr(lr);
     optim.zero_grad();

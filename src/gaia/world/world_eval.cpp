@@ -19,7 +19,7 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
   auto eps = ds.indices(ids);
   auto windows = validation_windows(ds, eps, info.config.world.context_steps, o.max_windows);
   if (windows.empty()) fail("{}: no held-out window of {} steps to score", o.name, info.config.world.context_steps);
-  const text::Vocab* vocab = ds.has_captions() ? &info.vocab : nullptr;
+  const TextSource text = text_source(info, ds);
   nlohmann::json j = {{"tokens", o.name}, {"world", o.weights}, {"windows", windows.size()}};
   std::vector<int> ks = o.top_k_sweep.empty() ? std::vector<int>{1, info.config.world.top_k, 0} : o.top_k_sweep;
   for (int k : ks)
@@ -35,7 +35,7 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
     so.mode = mode;
     so.shuffle = shuffle;
     so.batch = info.config.world.batch_size;
-    auto s = score(model, ds, windows, vocab, so);
+    auto s = score(model, ds, windows, text, so);
     step();
     return s;
   };
