@@ -4,6 +4,11 @@ unscaled dot-product attention with a bucketed relative position bias from block
 gated-GELU feed-forward. The transformers library is not needed.
 
   /usr/bin/python3 tools/t5_peer.py --make-fixture     # writes tests/fixtures/t5/ (run from the repository root)
+  /usr/bin/python3 tools/t5_peer.py --make-encoder DIR --captions FILE [--vocab 1000 --d-model 128 --layers 2]
+
+--make-encoder writes a small random-weight T5 v1.1 encoder in Hugging Face's layout, with a SentencePiece model
+trained on FILE's captions (one a line): a stand-in text encoder where no pretrained T5 can be had (docs/evaluation.md,
+"Text control": the built-in words against T5 embeddings on the same data).
 
 The fixture: a tiny SentencePiece model trained on captions written like the procedural world's, two tiny
 random-weight encoders in Hugging Face's naming (relu/: T5, F32, with decoder tensors the encoder must ignore;
@@ -175,6 +180,27 @@ def random_weights(cfg, gen, extra):
     return w
 
 
+def make_encoder(out, captions_file, vocab, d_model, layers):
+    texts = [line.strip() for line in open(captions_file, encoding="utf-8") if line.strip()]
+    sp_bytes = train_spm(texts, vocab)
+    sp = spm.SentencePieceProcessor(model_proto=sp_bytes)
+    heads = max(1, d_model // 32)
+    cfg = {"d_model": d_model, "d_kv": d_model // heads, "num_heads": heads, "d_ff": 2 * d_model,
+           "num_layers": layers, "relative_attention_num_buckets": 32, "relative_attention_max_distance": 128,
+           "layer_norm_epsilon": 1e-6, "vocab_size": sp.get_piece_size() + 8, "model_type": "t5",
+           "feed_forward_proj": "gated-gelu", "eos_token_id": EOS, "pad_token_id": PAD}
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "config.json"), "w") as f:
+        json.dump(cfg, f, indent=2)
+    with open(os.path.join(out, "spiece.model"), "wb") as f:
+        f.write(sp_bytes)
+    safetensors_py.save(random_weights(cfg, torch.Generator().manual_seed(0), extra=False),
+                        os.path.join(out, "model.safetensors"))
+    lengths = sorted(len(tokenize(sp, t)) for t in texts)
+    print(f"wrote {out}: {sp.get_piece_size()} pieces, d_model {d_model}, {layers} layers; tokens per caption: "
+          f"median {lengths[len(lengths) // 2]}, max {lengths[-1]}")
+
+
 def make_fixture(out):
     sp_bytes = train_spm(captions(200))
     sp = spm.SentencePieceProcessor(model_proto=sp_bytes)
@@ -215,10 +241,20 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--make-fixture", action="store_true", help="write the T5 fixture")
     ap.add_argument("--out", default="tests/fixtures/t5")
+    ap.add_argument("--make-encoder", metavar="DIR", help="write a small random-weight T5 v1.1 encoder to DIR")
+    ap.add_argument("--captions", help="--make-encoder: the captions (one a line) its SentencePiece model learns")
+    ap.add_argument("--vocab", type=int, default=1000)
+    ap.add_argument("--d-model", type=int, default=128)
+    ap.add_argument("--layers", type=int, default=2)
     a = ap.parse_args()
-    if not a.make_fixture:
-        ap.error("nothing to do: pass --make-fixture")
-    make_fixture(a.out)
+    if a.make_encoder:
+        if not a.captions:
+            ap.error("--make-encoder needs --captions FILE")
+        make_encoder(a.make_encoder, a.captions, a.vocab, a.d_model, a.layers)
+    elif a.make_fixture:
+        make_fixture(a.out)
+    else:
+        ap.error("nothing to do: pass --make-fixture or --make-encoder DIR")
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ namespace {
 struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
-      action_negative = "mirror", commands = "default";
+      action_negative = "mirror", commands = "default", t5;
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   int long_rollouts = emerging::RolloutEvalOptions{}.long_rollouts;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
@@ -36,6 +36,7 @@ void register_eval(CLI::App& app) {
                   "replay");
   add_weights_flag(cmd, Weights::World, &e->world)->required();
   add_weights_flag(cmd, Weights::Tokenizer, &e->tokenizer, "decodes the rollouts")->required();
+  add_weights_flag(cmd, Weights::T5, &e->t5, "encodes text control's prompts for a world model trained on its embeddings");
   auto old_dataset = add_old_spelling(cmd, "--dataset", "the positional EPISODES");
   cmd->add_option("--dynamics-probe", e->dynamics_probe, "dynamics probe weights (default: the shipped one)");
   cmd->add_option("--scene-probe", e->scene_probe, "scene probe weights (default: the shipped one)");
@@ -83,7 +84,7 @@ void register_eval(CLI::App& app) {
     if (parts.count("long") && e->long_rollouts < 1)  // before any model is loaded or part is run
       fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
-    auto m = emerging::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev);
+    auto m = emerging::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev, e->t5);
     apply_sampling_sets(*flags, "world", kWorldSamplingKeys, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())

@@ -21,6 +21,7 @@
 #include "gaia/tokenizer/io.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/prompt_text.h"
 #include "gaia/world/rollout.h"
 
 namespace gaia::demo {
@@ -166,11 +167,10 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   // 3. Text alone (§5): no video prompt, the text prompt at every step and constant guidance on every frame.
   const auto& texts = demo_text_prompts();
   const int64_t M = wc.world.text_tokens, Tn = int64_t(texts.size());
-  if (m.info.vocab.size() == 0) fail("{}: the world model has no text vocabulary (trained without captions)", world_w.string());
   world::RolloutPrompt tp;
-  tp.text_ids = torch::zeros({Tn, F, M}, torch::kLong);
-  for (int64_t i = 0; i < Tn; ++i)
-    tp.text_ids[i].copy_(torch::tensor(m.info.vocab.encode(texts[size_t(i)].prompt, M)).unsqueeze(0).expand({F, M}));
+  std::vector<std::string> words;
+  for (auto& t : texts) words.push_back(t.prompt);
+  world::set_future_texts(tp, m.text_encoder(), words, F, M);
   world::RolloutOptions to = ro;
   to.futures = int(Tn);
   to.guidance.scale = o.text_guidance;

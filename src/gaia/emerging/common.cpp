@@ -9,14 +9,17 @@
 #include "gaia/probe/trainer.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/prompt_text.h"
 
 namespace gaia::emerging {
 
 Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
-                   const fs::path& scene_probe, const torch::Device& dev) {
+                   const fs::path& scene_probe, const torch::Device& dev, const fs::path& t5) {
   Models m;
   m.dev = dev;
+  m.world_path = world;
   m.world = world::load_world(world, dev, &m.info);
+  if (!m.info.embeds_text() || !t5.empty()) m.text = world::prompt_encoder(m.info, world.string(), t5, dev);
   m.tok = tokenizer::load_tokenizer(tokenizer, dev);
   check_tokenizer_fits(m.info, world, m.tok, tokenizer);
   m.dynamics = probe::load_probe(dynamics_probe, dev);
@@ -24,6 +27,13 @@ Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::p
   m.scene = probe::load_probe(scene_probe, dev);
   if (m.scene->kind != probe::ProbeKind::kScene) fail("{}: not a scene probe", scene_probe.string());
   return m;
+}
+
+text::TextEncoder& Models::text_encoder() const {
+  if (!text) world::prompt_encoder(info, world_path.string(), {});  // fails, saying which flag to give
+  if (!text->embeds() && info.vocab.size() == 0)
+    fail("{}: the world model has no text vocabulary (trained without captions)", world_path.string());
+  return *text;
 }
 
 void check_tokenizer_fits(const world::WorldInfo& info, const fs::path& world, const tokenizer::ImageTokenizer& tok,

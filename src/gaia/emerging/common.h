@@ -15,6 +15,7 @@
 
 #include "gaia/probe/probe.h"
 #include "gaia/tokenizer/autoencoder.h"
+#include "gaia/text/encoder.h"
 #include "gaia/world/io.h"
 #include "gaia/world/token_dataset.h"
 
@@ -26,11 +27,17 @@ struct Models {
   tokenizer::ImageTokenizer tok{nullptr};
   probe::ProbeNet dynamics{nullptr}, scene{nullptr};
   torch::Device dev{torch::kCPU};
+  // Text prompts as the world model reads them (world/prompt_text.h); null for a model that reads T5 embeddings
+  // when no T5 was given (text prompts then fail naming --t5).
+  std::shared_ptr<text::TextEncoder> text;
+  fs::path world_path;
+  text::TextEncoder& text_encoder() const;  // fails as said above
 };
 
-// Loads the four weight files; errors name the file (and say when the tokenizer's grid is not the world model's).
+// Loads the four weight files (and `t5`, the text encoder of a world model trained on T5 embeddings); errors name
+// the file (and say when the tokenizer's grid is not the world model's).
 Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::path& dynamics_probe,
-                   const fs::path& scene_probe, const torch::Device& dev);
+                   const fs::path& scene_probe, const torch::Device& dev, const fs::path& t5 = {});
 // Fails, naming both files, unless the tokenizer makes the token grid and codebook the world model was trained on.
 void check_tokenizer_fits(const world::WorldInfo& info, const fs::path& world, const tokenizer::ImageTokenizer& tok,
                           const fs::path& tokenizer);

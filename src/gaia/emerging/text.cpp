@@ -4,6 +4,7 @@
 
 #include "gaia/core/error.h"
 #include "gaia/eval/svg_plot.h"
+#include "gaia/world/prompt_text.h"
 #include "gaia/world/rollout.h"
 
 namespace gaia::emerging {
@@ -79,16 +80,14 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
 nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real) {
   const auto targets = text_targets();
   const int64_t G = int64_t(targets.size()), N = G * o.futures, F = o.frames, M = m.info.config.world.text_tokens;
-  if (m.info.vocab.size() == 0) fail("the world model has no text vocabulary (trained without captions)");
-  auto ids = [&](const std::string& t) { return torch::tensor(m.info.vocab.encode(t, M), torch::kLong); };
-  world::RolloutPrompt p;
-  p.text_ids = torch::zeros({N, F, M}, torch::kLong);
-  auto neg = torch::zeros({N, F, M}, torch::kLong);
+  std::vector<std::string> prompts, negatives;
   for (int64_t r = 0; r < N; ++r) {
-    const auto& t = targets[size_t(r / o.futures)];
-    p.text_ids[r].copy_(ids(t.prompt).unsqueeze(0).expand({F, M}));
-    neg[r].copy_(ids(t.negative).unsqueeze(0).expand({F, M}));
+    prompts.push_back(targets[size_t(r / o.futures)].prompt);
+    negatives.push_back(targets[size_t(r / o.futures)].negative);
   }
+  world::RolloutPrompt p, with_negative;
+  world::set_future_texts(p, m.text_encoder(), prompts, F, M);
+  world::set_future_texts(with_negative, m.text_encoder(), negatives, F, M, true);
   std::vector<Run> runs;
   for (double s : o.scales) runs.push_back({fmt::format("s = {}", s), {s}, false});
   const double top = o.scales.empty() ? 2.0 : o.scales.back();
@@ -109,7 +108,10 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
   for (size_t ri = 0; ri < runs.size(); ++ri) {
     const auto& run = runs[ri];
     world::RolloutPrompt q = p;
-    if (run.negative) q.negative_text_ids = neg;
+    if (run.negative) {
+      q.negative_text_ids = with_negative.negative_text_ids;
+      q.negative_text_emb = with_negative.negative_text_emb;
+    }
     world::RolloutOptions ro;
     ro.frames = int(F);
     ro.futures = int(N);

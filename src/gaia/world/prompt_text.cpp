@@ -5,6 +5,13 @@
 
 namespace gaia::world {
 
+namespace {
+torch::Tensor& text_field(RolloutPrompt& p, bool embeddings, bool negative) {
+  if (embeddings) return negative ? p.negative_text_emb : p.text_emb;
+  return negative ? p.negative_text_ids : p.text_ids;
+}
+}  // namespace
+
 bool same_text_encoder(const std::string& a, const std::string& b) {
   if (a == b) return true;
   auto hash = [](const std::string& s) { return s.rfind("t5:", 0) == 0 ? s.substr(s.rfind(':')) : s; };
@@ -41,9 +48,14 @@ torch::Tensor repeat_rows(const torch::Tensor& row, int64_t steps) {
 }
 
 void set_prompt_text(RolloutPrompt& p, const torch::Tensor& row, int64_t steps, bool negative) {
-  auto rows = repeat_rows(row, steps);
-  const bool emb = row.is_floating_point();
-  (emb ? (negative ? p.negative_text_emb : p.text_emb) : (negative ? p.negative_text_ids : p.text_ids)) = rows;
+  text_field(p, row.is_floating_point(), negative) = repeat_rows(row, steps);
+}
+
+void set_future_texts(RolloutPrompt& p, text::TextEncoder& encoder, const std::vector<std::string>& texts,
+                      int64_t steps, int64_t m, bool negative) {
+  std::vector<torch::Tensor> rows;
+  for (auto& t : texts) rows.push_back(repeat_rows(encoder.encode(t, m), steps));
+  text_field(p, encoder.embeds(), negative) = torch::stack(rows);
 }
 
 torch::Tensor read_prompt_embeddings(const fs::path& file, const WorldInfo& info, int64_t steps) {

@@ -25,6 +25,11 @@ torch::Tensor repeat_rows(const torch::Tensor& row, int64_t steps);
 // `row` ([m] word ids or [m, dim] embeddings) repeated for `steps`, as the text (or the negative text) of `p`.
 void set_prompt_text(RolloutPrompt& p, const torch::Tensor& row, int64_t steps, bool negative = false);
 
+// One text per future, each for all `steps` steps, through `encoder` (m tokens): the text (or negative text) of
+// `p`, [futures, steps, m] ids or [futures, steps, m, dim] embeddings.
+void set_future_texts(RolloutPrompt& p, text::TextEncoder& encoder, const std::vector<std::string>& texts,
+                      int64_t steps, int64_t m, bool negative = false);
+
 // A prompt given as embeddings (--text-emb FILE, .npy or .safetensors): [m, dim] for every step, or [steps, m, dim];
 // m and dim must be the model's. Returns [steps, m, dim].
 torch::Tensor read_prompt_embeddings(const fs::path& file, const WorldInfo& info, int64_t steps);
