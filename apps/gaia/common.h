@@ -155,6 +155,7 @@ void register_train_all(CLI::App& app); // gaia train-all (the whole recipe)
 void register_report(CLI::App& app);    // gaia report RUN_DIR
 void register_sim(CLI::App& app);       // gaia sim --stdio (closed-loop sessions)
 void register_text(CLI::App& app);      // gaia text embed (T5 embeddings of a dataset's captions)
+void register_scaling(CLI::App& app);   // gaia scaling (the scaling-law study, §6)
 // A token dataset's captions through the T5 at `t5` into its text embeddings (world/embed_captions.h), with progress.
 void embed_dataset_captions(const std::string& tokens, const std::string& t5, int64_t m, const torch::Device& dev);
 

@@ -126,6 +126,7 @@ int main(int argc, char** argv) {
   gaia::app::register_report(app);
   gaia::app::register_sim(app);
   gaia::app::register_text(app);
+  gaia::app::register_scaling(app);
   gaia::app::check_numbers(app);
   try {
     app.parse(argc, argv);

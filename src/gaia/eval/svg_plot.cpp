@@ -119,6 +119,62 @@ std::string svg_lines(const std::string& title, const std::vector<double>& x, co
   return out + legend(series, w) + "</svg>\n";
 }
 
+std::string svg_loglog(const std::string& title, const std::vector<XYSeries>& series, const std::string& xlabel,
+                       const std::string& ylabel, int w, int h) {
+  double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+  for (auto& s : series) {
+    for (double v : s.x)
+      if (v > 0 && std::isfinite(v)) { x0 = std::min(x0, v); x1 = std::max(x1, v); }
+    for (const auto* ys : {&s.y, &s.y_lo, &s.y_hi})
+      for (double v : *ys)
+        if (v > 0 && std::isfinite(v)) { y0 = std::min(y0, v); y1 = std::max(y1, v); }
+  }
+  if (!(x0 <= x1)) { x0 = 1; x1 = 10; }
+  if (!(y0 <= y1)) { y0 = 1; y1 = 10; }
+  // Decades that hold the data, with a margin of a tenth of the span on the y axis (losses span little).
+  const double lx0 = std::floor(std::log10(x0)), lx1 = std::max(lx0 + 1, std::ceil(std::log10(x1)));
+  const double pad = std::max(0.02, 0.1 * (std::log10(y1) - std::log10(y0)));
+  const double ly0 = std::log10(y0) - pad, ly1 = std::log10(y1) + pad;
+  const double plot_w = w - kLeft - kRight, plot_h = h - kTop - kBottom;
+  auto px = [&](double x) { return kLeft + plot_w * (std::log10(x) - lx0) / (lx1 - lx0); };
+  auto py = [&](double y) { return h - kBottom - plot_h * (std::log10(y) - ly0) / (ly1 - ly0); };
+  std::string out = header(w, h, title);
+  for (double e = lx0; e <= lx1; e += 1) {
+    const double x = kLeft + plot_w * (e - lx0) / (lx1 - lx0);
+    out += fmt::format("<line x1=\"{0:.1f}\" x2=\"{0:.1f}\" y1=\"{1}\" y2=\"{2}\" stroke=\"#ddd\"/>\n", x, kTop, h - kBottom);
+    out += fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">1e{}</text>\n", x, h - kBottom + 14, int(e));
+  }
+  for (int i = 0; i <= 4; ++i) {  // the loss axis: five ticks at round values
+    const double v = std::pow(10.0, ly0 + (ly1 - ly0) * i / 4.0), y = py(v);
+    out += fmt::format("<line x1=\"{}\" x2=\"{}\" y1=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"#ddd\"/>\n", kLeft, w - kRight, y, y);
+    out += fmt::format("<text x=\"{}\" y=\"{:.1f}\" text-anchor=\"end\">{:.3g}</text>\n", kLeft - 4, y + 4, v);
+  }
+  std::vector<Series> names;
+  for (size_t s = 0; s < series.size(); ++s) {
+    const auto& S = series[s];
+    const std::string color = S.color.empty() ? kPalette[s % 6] : S.color;
+    names.push_back({S.name, {}, color});
+    std::string pts;
+    for (size_t i = 0; i < S.x.size() && i < S.y.size(); ++i) {
+      if (!(S.x[i] > 0 && S.y[i] > 0)) continue;
+      if (!S.points) {
+        pts += fmt::format("{:.1f},{:.1f} ", px(S.x[i]), py(S.y[i]));
+        continue;
+      }
+      out += fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"4\" fill=\"{}\"/>\n", px(S.x[i]), py(S.y[i]), color);
+      if (i < S.y_lo.size() && i < S.y_hi.size() && S.y_lo[i] > 0 && S.y_hi[i] > 0)
+        out += fmt::format("<line x1=\"{0:.1f}\" x2=\"{0:.1f}\" y1=\"{1:.1f}\" y2=\"{2:.1f}\" stroke=\"{3}\" "
+                           "stroke-width=\"2\"/>\n", px(S.x[i]), py(S.y_lo[i]), py(S.y_hi[i]), color);
+    }
+    if (!S.points && !pts.empty())
+      out += fmt::format("<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>\n", color, pts);
+  }
+  out += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", kLeft + plot_w / 2, h - kBottom + 32, xml_escape(xlabel));
+  out += fmt::format("<text x=\"12\" y=\"{}\" transform=\"rotate(-90 12 {})\" text-anchor=\"middle\">{}</text>\n",
+                     kTop + plot_h / 2, kTop + plot_h / 2, xml_escape(ylabel));
+  return out + legend(names, w) + "</svg>\n";
+}
+
 std::string svg_stack(const std::vector<std::string>& charts, int w, int h) {
   std::string out = fmt::format("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" viewBox=\"0 0 {0} {1}\">\n",
                                 w, h * static_cast<int>(charts.size()));

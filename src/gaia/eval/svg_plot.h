@@ -19,6 +19,18 @@ std::string svg_bars(const std::string& title, const std::vector<std::string>& c
 std::string svg_lines(const std::string& title, const std::vector<double>& x, const std::vector<Series>& series,
                       const std::string& xlabel, const std::string& ylabel, int width = 640, int height = 320);
 
+// Points and curves on log-log axes with decade ticks (a scaling law, §6). A series with `points` draws markers
+// (and, where y_lo / y_hi are given, an error bar at each point); otherwise a line through its (x, y).
+struct XYSeries {
+  std::string name;
+  std::vector<double> x, y;
+  std::string color;  // "" = from the palette
+  bool points = false;
+  std::vector<double> y_lo, y_hi;
+};
+std::string svg_loglog(const std::string& title, const std::vector<XYSeries>& series, const std::string& xlabel,
+                       const std::string& ylabel, int width = 640, int height = 360);
+
 // Stacks several SVG charts vertically into one document.
 std::string svg_stack(const std::vector<std::string>& charts, int width = 640, int height_each = 320);
 

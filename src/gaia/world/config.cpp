@@ -28,6 +28,11 @@ void add_config_fields(WorldConfig& w, std::vector<ConfigField>& f) {
   f.push_back(config_field("world.steps", &w.steps, T, kStepsRange));
   f.push_back(config_field("world.batch_size", &w.batch_size, T, kBatchRange));
   f.push_back(config_field("world.activation_checkpointing", &w.activation_checkpointing, T));
+  f.push_back(config_field("world.scaling_width", &w.scaling_width, T, closed(1, 65536)));
+  f.push_back(config_field("world.scaling_head_dim", &w.scaling_head_dim, T, closed(1, 65536)));
+  f.push_back(config_field("world.scaling_width_per_layer", &w.scaling_width_per_layer, T, closed(1, 65536)));
+  f.push_back(config_field("world.scaling_growth", &w.scaling_growth, T, closed(1.01, 16)));
+  f.push_back(config_field("world.scaling_tokens_per_param", &w.scaling_tokens_per_param, T, above(0, 1e6)));
   f.push_back(config_field("world.top_k", &w.top_k, S, closed(1, 1 << 20)));
   f.push_back(config_field("world.temperature", &w.temperature, S, above(0, 100)));
   f.push_back(config_field("world.copy_bias", &w.copy_bias, A, closed(-100, 100)));

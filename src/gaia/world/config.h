@@ -44,6 +44,14 @@ struct WorldConfig {
   int warmup_steps = 100, steps = 3000, batch_size = 4;
   bool activation_checkpointing = false;  // paper §4.2 uses it with DeepSpeed ZeRO-2
 
+  // Scaling-law study (§6, `gaia scaling`): model k = 0, 1, ... of the family has d_model = scaling_width x
+  // scaling_growth^k rounded to a multiple of scaling_head_dim, n_heads = d_model / scaling_head_dim, n_layers =
+  // max(1, round(d_model / scaling_width_per_layer)) (a fixed aspect ratio, as Kaplan et al. 2020), and trains on
+  // scaling_tokens_per_param x N tokens (N: non-embedding parameters; Hoffmann et al. 2022 find about 20 optimal),
+  // its warm-up and cosine decay fitted to its own length.
+  int scaling_width = 16, scaling_head_dim = 16, scaling_width_per_layer = 48;
+  double scaling_growth = 1.5, scaling_tokens_per_param = 20;
+
   // Sampling (§5.1).
   int top_k = 50;                // paper §5.1 Fig. 5: top-k = 50
   double temperature = 1.0;
