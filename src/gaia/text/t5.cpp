@@ -7,10 +7,12 @@
 
 #include <fmt/format.h>
 
+#include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/core/json_file.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/text/sentencepiece.h"
+#include "gaia/torch/attention.h"
 #include "gaia/torch/tensor_io.h"
 
 namespace gaia::text {
@@ -111,8 +113,8 @@ struct AttentionImpl : nn::Module {
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& bias) {  // x [B, L, d], bias [B, H, L, L]
     const int64_t B = x.size(0), L = x.size(1);
     auto split = [&](const torch::Tensor& t) { return t.view({B, L, heads, d_kv}).transpose(1, 2); };  // [B, H, L, dk]
-    const auto scores = torch::matmul(split(q(x)), split(k(x)).transpose(2, 3)) + bias;           // [B, H, L, L]
-    const auto y = torch::matmul(torch::softmax(scores, -1), split(v(x)));                         // [B, H, L, dk]
+    // gaia::attention divides the scores by sqrt(d_kv); T5's are unscaled, so q carries the factor back.
+    const auto y = attention(split(q(x)) * std::sqrt(double(d_kv)), split(k(x)), split(v(x)), bias);  // [B, H, L, dk]
     return o(y.transpose(1, 2).reshape({B, L, heads * d_kv}));
   }
 };
@@ -186,8 +188,6 @@ struct StackImpl : nn::Module {
 };
 TORCH_MODULE(Stack);
 
-std::string shape_str(at::IntArrayRef s) { return fmt::format("[{}]", fmt::join(s, ", ")); }
-
 // FNV-1a 64 over several byte ranges in turn.
 struct Fnv {
   uint64_t h = 1469598103934665603ull;
@@ -236,8 +236,8 @@ void load_weights(T5Net& net, const SafetensorsFile& file) {
       fail("{}: missing tensor '{}'{}", path.string(), name, source != name ? " (or '" + source + "')" : "");
     const auto t = tensor_from_view(file.get(source));
     if (t.sizes() != param.sizes())
-      fail("{}: tensor '{}' has shape {}, config.json implies {}", path.string(), source, shape_str(t.sizes()),
-           shape_str(param.sizes()));
+      fail("{}: tensor '{}' has shape {}, config.json implies {}", path.string(), source, shape_str(t.sizes().vec()),
+           shape_str(param.sizes().vec()));
     if (!t.is_floating_point())
       fail("{}: tensor '{}' is {}, expected a float type", path.string(), source, c10::toString(t.scalar_type()));
     param.copy_(t.to(torch::kFloat));
