@@ -141,7 +141,7 @@ ScalingResult run_scaling(const Config& c, const ScalingOptions& o,
   eval::XYSeries held{"largest: outcome", {at}, {res.runs[last].loss}, "#E45756", true, {}, {}};
   eval::XYSeries predicted{"largest: prediction, 5-95%", {at}, {res.predicted}, "#F58518", true, {res.band.lo},
                            {res.band.hi}};
-  eval::XYSeries curve{fmt::format("c + (C/a)^b: c {:.3f}, b {:.3f}", res.fit.c, res.fit.b), {}, {}, "#54A24B", false, {}, {}};
+  eval::XYSeries curve{fmt::format("fit: c {:.2f}, b {:.3f}", res.fit.c, res.fit.b), {}, {}, "#54A24B", false, {}, {}};
   for (int i = 0; i <= 60; ++i) {
     const double f = std::exp(std::log(x.front()) + (std::log(at) - std::log(x.front())) * i / 60.0);
     curve.x.push_back(f);
