@@ -194,6 +194,78 @@ TEST(TextEmbeddings, WorldModelTrainsAndScoresOnEmbeddings) {
             std::string::npos);
 }
 
+// A fine-tune that gives a trained model another text (--text-encoder, --fresh-text): the text path starts afresh
+// (word_embedding and text_proj as a fresh model has them, the projection at the new width, the words of this
+// dataset), everything else comes from --init; keeping --init's kind of text from another encoder, or another m,
+// is refused.
+TEST(TextEmbeddings, FineTuneLearnsTheTextPathAfresh) {
+  using Text = world::WorldTrainOptions::Text;
+  test::TempDir dir;
+  const fs::path root = make_embedded(dir);
+  auto train = [&](const fs::path& out, Text text, const fs::path& init = {}, bool fresh = false) {
+    world::WorldTrainOptions o;
+    o.tokens = root;
+    o.out = out;
+    o.steps = 2;
+    o.val_every = 2;
+    o.text = text;
+    o.init = init;
+    o.fresh_text = fresh;
+    // Only the text path trains: what the fine-tune took from --init stays exactly --init's.
+    if (!init.empty()) o.train_only = {"text_proj", "word_embedding"};
+    return world::train_world(tiny_config(), o);
+  };
+  train(dir / "words", Text::Words);  // the dataset has embeddings; the built-in words are asked for
+  world::WorldInfo wi;
+  auto words = world::load_world(dir / "words" / "world.safetensors", torch::kCPU, &wi);
+  ASSERT_FALSE(wi.embeds_text());
+  ASSERT_GT(wi.vocab.size(), 2);
+
+  auto r = train(dir / "to-emb", Text::Embeddings, dir / "words" / "world.safetensors");
+  bool said = false;
+  for (auto& n : r.notes) said |= n.find("starts afresh for embeddings of test-encoder") != std::string::npos;
+  EXPECT_TRUE(said);
+  world::WorldInfo ei;
+  auto emb = world::load_world(dir / "to-emb" / "world.safetensors", torch::kCPU, &ei);
+  EXPECT_EQ(ei.text_encoder, "test-encoder");
+  EXPECT_EQ(emb->text_proj->weight.size(1), kDim);
+  EXPECT_EQ(ei.vocab.size(), 2);
+  EXPECT_TRUE(torch::equal(emb->head->weight, words->head->weight));
+  EXPECT_TRUE(torch::equal(emb->spatial_pos, words->spatial_pos));
+  torch::manual_seed(ei.config.run.seed);
+  world::WorldModel fresh(ei.config.world, ei.n(), ei.K);
+  EXPECT_TRUE(torch::equal(emb->word_embedding->weight, fresh->word_embedding->weight));  // unused by embeddings
+  EXPECT_FALSE(torch::allclose(emb->text_proj->weight, fresh->text_proj->weight));         // trained from fresh
+
+  // Back to words, afresh: the vocabulary is this dataset's, the word table starts as a fresh model's.
+  r = train(dir / "back", Text::Words, dir / "to-emb" / "world.safetensors");
+  world::WorldInfo bi;
+  auto back = world::load_world(dir / "back" / "world.safetensors", torch::kCPU, &bi);
+  EXPECT_FALSE(bi.embeds_text());
+  EXPECT_TRUE(bi.vocab == wi.vocab);
+  EXPECT_TRUE(torch::equal(back->head->weight, words->head->weight));
+  // --fresh-text with the same kind of text: words relearned, not --init's.
+  train(dir / "again", Text::Auto, dir / "words" / "world.safetensors", true);
+  auto again = world::load_world(dir / "again" / "world.safetensors", torch::kCPU);
+  EXPECT_FALSE(torch::allclose(again->word_embedding->weight, words->word_embedding->weight));
+
+  // Keeping an embeddings model's text on another encoder's embeddings: refused, naming the way out.
+  world::write_text_emb_info(root, {"another-encoder", kM, kDim});
+  EXPECT_NE(test::error_of([&] { train(dir / "x1", Text::Auto, dir / "to-emb" / "world.safetensors"); })
+                .find("has embeddings of another-encoder (--fresh-text learns its text path afresh for them)"),
+            std::string::npos);
+  r = train(dir / "other", Text::Auto, dir / "to-emb" / "world.safetensors", true);
+  EXPECT_EQ(r.final_step, 2);
+  // Another m: the model's positions are per token, so m must be --init's.
+  world::write_text_embeddings(root / "episodes" / "e0", episode_emb(0, 8, kM + 1));
+  world::write_text_embeddings(root / "episodes" / "e1", episode_emb(1, 10, kM + 1));
+  world::write_text_emb_info(root, {"test-encoder", kM + 1, kDim});
+  EXPECT_NE(test::error_of([&] { train(dir / "x2", Text::Embeddings, dir / "words" / "world.safetensors"); })
+                .find("reads m = 2 text tokens per step, but " + root.string() + "'s embeddings have m = 3"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "x2" / "world.safetensors"));
+}
+
 TEST(TextEmbeddings, EmbedCaptionsIsCachedResumableAndKeyedByEncoder) {
   test::TempDir dir;
   const fs::path root = dir / "tokens";
@@ -319,7 +391,10 @@ TEST(TextEmbCli, T5EmbeddingsTrainEvaluateAndPrompt) {
   auto r = test::run_gaia("text embed " + q(root) + " --t5 " + q(t5) + tiny);
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("3 of 3 episodes embedded"), std::string::npos) << r.output;
-  r = test::run_gaia("world train " + q(root) + " --t5 " + q(t5) + tiny + " --steps 3 --val-every 3 --out " + q(dir / "run"));
+  r = test::run_gaia("world train " + q(root) + " --text-encoder t5" + tiny + " --steps 3 --out " + q(dir / "run"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--text-encoder t5 needs --t5 DIR"), std::string::npos) << r.output;
+  r = test::run_gaia("world train " + q(root) + " --text-encoder t5 --t5 " + q(t5) + tiny + " --steps 3 --val-every 3 --out " + q(dir / "run"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("already has embeddings"), std::string::npos) << r.output;  // embedded once
   EXPECT_NE(r.output.find("set world.text_tokens = 2 and world.text_dim = 32"), std::string::npos) << r.output;

@@ -69,21 +69,38 @@ void register_world(CLI::App& app) {
     add_weights_flag(cmd, Weights::T5, t5.get(),
                      "text as its embeddings (§2.1): the captions are embedded first, once (gaia text embed), "
                      "instead of the built-in words");
+    auto encoder = std::make_shared<std::string>();
+    cmd->add_option("--text-encoder", *encoder,
+                    "what reads the captions (§2.1): words (the built-in vocabulary), t5 (with --t5 DIR) or "
+                    "precomputed (the dataset's embeddings, from any encoder); default: --init's, else the "
+                    "dataset's embeddings where it has them, else words")
+        ->check(CLI::IsMember({"words", "t5", "precomputed"}));
+    cmd->add_flag("--fresh-text", o->fresh_text,
+                  "with --init: learn the text path (word embedding, text projection) afresh, with this dataset's "
+                  "words; implied when --text-encoder differs from what --init read");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, world.safetensors, metrics.jsonl)");
     auto par = std::make_shared<ParallelFlags>();
     add_parallel_flags(cmd, par.get());
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       if (flags->out.empty()) fail("gaia world train: --out RUN_DIR is required");
+      if (*encoder == "t5" && t5->empty()) fail("--text-encoder t5 needs --t5 DIR (a T5 encoder's folder)");
+      if (!t5->empty() && !encoder->empty() && *encoder != "t5")
+        fail("--t5 {} contradicts --text-encoder {}", *t5, *encoder);
+      if (o->fresh_text && o->init.empty()) fail("--fresh-text needs --init (a fine-tune's text path)");
       // Before any rank starts, so they find the embeddings there; ranks of a job (several machines) check only.
       if (!t5->empty()) {
-        if (!std::getenv("WORLD_SIZE")) embed_dataset_captions(*tokens, *t5, c.world.text_tokens, parse_device(c.run.device));
+        // m as the model reads it: a fine-tune's is its --init model's
+        const int64_t m = o->init.empty() ? c.world.text_tokens : world::read_world_info(o->init).config.world.text_tokens;
+        if (!std::getenv("WORLD_SIZE")) embed_dataset_captions(*tokens, *t5, m, parse_device(c.run.device));
         else if (!fs::exists(fs::path(*tokens) / world::kTextEmbInfoFile))
           fail("{}: no text embeddings yet: run gaia text embed {} --t5 {} before the job", *tokens, *tokens, *t5);
       }
       if (launch_local_ranks(*par)) return;
       auto dist = join_job(*par, c);
       world::WorldTrainOptions opt = *o;
+      using Text = world::WorldTrainOptions::Text;
+      opt.text = *encoder == "words" ? Text::Words : (!t5->empty() || *encoder == "precomputed") ? Text::Embeddings : Text::Auto;
       opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer, !par->no_overlap};
       opt.tokens = *tokens;
       opt.format = token_format(*format, c, false);

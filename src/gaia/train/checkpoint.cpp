@@ -105,7 +105,8 @@ uint64_t step_seed(uint64_t seed, int step, uint64_t stream) {
 }
 
 std::string init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::path& from,
-                      const std::function<bool(const std::string&)>& fresh) {
+                      const std::function<bool(const std::string&)>& fresh,
+                      const std::function<bool(const std::string&)>& keep) {
   const auto have = src.named_parameters();
   const auto want = dst.named_parameters();
   std::vector<std::string> dropped;
@@ -113,6 +114,7 @@ std::string init_from(torch::nn::Module& dst, const torch::nn::Module& src, cons
     if (!want.find(q.key())) dropped.push_back(q.key());
   torch::NoGradGuard ng;
   for (auto& p : dst.named_parameters()) {
+    if (keep && keep(p.key())) continue;
     const auto* q = have.find(p.key());
     if (!q) {
       if (fresh && fresh(p.key())) continue;

@@ -54,10 +54,12 @@ CheckpointState load_checkpoint(const fs::path& dir, const std::vector<std::pair
 
 // Fine-tuning (`--init WEIGHTS`): copies every parameter of `src` into `dst` by name. Parameters of `dst` for
 // which `fresh(name)` is true may be absent from `src` (they are trained from scratch); any other absent name or a
-// shape mismatch fails naming `from` (the --init file has a different architecture). Returns a note naming what
-// `src` has and `dst` lacks (dropped: the run's config leaves them out), or "" when nothing is dropped.
+// shape mismatch fails naming `from` (the --init file has a different architecture). Parameters for which
+// `keep(name)` is true keep their own initialisation whatever `src` has (a part learned afresh). Returns a note
+// naming what `src` has and `dst` lacks (dropped: the run's config leaves them out), or "" when nothing is dropped.
 std::string init_from(torch::nn::Module& dst, const torch::nn::Module& src, const fs::path& from,
-                      const std::function<bool(const std::string&)>& fresh = {});
+                      const std::function<bool(const std::string&)>& fresh = {},
+                      const std::function<bool(const std::string&)>& keep = {});
 
 // Per-step seeding: the same (seed, step) gives the same batch and noise whether or not the run was resumed.
 uint64_t step_seed(uint64_t seed, int step, uint64_t stream = 0);

@@ -16,7 +16,7 @@ void save_world(WorldModel& m, const WorldInfo& info, const fs::path& path) {
   save_module(*m, path, md);
 }
 
-WorldModel load_world(const fs::path& path, const torch::Device& device, WorldInfo* info_out) {
+WorldInfo read_world_info(const fs::path& path) {
   WorldInfo info;
   {
     SafetensorsFile f(path);
@@ -45,6 +45,11 @@ WorldModel load_world(const fs::path& path, const torch::Device& device, WorldIn
       fail("{}: gaia.action_share is not a number", path.string());
     }
   }
+  return info;
+}
+
+WorldModel load_world(const fs::path& path, const torch::Device& device, WorldInfo* info_out) {
+  const WorldInfo info = read_world_info(path);
   WorldModel m(info.config.world, info.n(), info.K);
   load_module(*m, path);
   m->to(device);

@@ -21,6 +21,8 @@ struct WorldInfo {
 };
 
 void save_world(WorldModel& m, const WorldInfo& info, const fs::path& path);
+// The metadata alone (no weights read). Errors name the file.
+WorldInfo read_world_info(const fs::path& path);
 // Builds the model from the file's metadata and loads the weights (on `device`, eval mode). Errors name the file.
 WorldModel load_world(const fs::path& path, const torch::Device& device, WorldInfo* info_out = nullptr);
 

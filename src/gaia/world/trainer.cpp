@@ -91,28 +91,42 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
            init_info.grid_w, init_info.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
   }
   // Text (§2.1): the dataset's precomputed embeddings where it has them (a fine-tune keeps its --init model's kind
-  // of text), else the built-in words.
-  const bool embeddings = init ? init_info.embeds_text() : ds.has_text_emb();
+  // of text unless told otherwise), else the built-in words.
+  using Text = WorldTrainOptions::Text;
+  const bool embeddings = opt.text == Text::Auto ? (init ? init_info.embeds_text() : ds.has_text_emb())
+                                                 : opt.text == Text::Embeddings;
+  if (embeddings && !ds.has_text_emb())
+    fail("{}: no text embeddings (gaia text embed {} --t5 DIR){}", opt.tokens.string(), opt.tokens.string(),
+         init ? fmt::format(", and {} was trained on embeddings of {}", opt.init.string(), init_info.text_encoder) : "");
+  const std::string encoder = embeddings ? ds.text_emb().encoder : "";
+  // Another text than --init's: its text path means nothing for this one and is learned afresh.
+  const bool fresh_text = init && (opt.fresh_text || encoder != init_info.text_encoder);
+  if (init && encoder != init_info.text_encoder && opt.text == Text::Auto && !opt.fresh_text)
+    fail("{}: was trained on text embeddings of {}, but {} has embeddings of {} (--fresh-text learns its text path "
+         "afresh for them)", opt.init.string(), init_info.text_encoder, opt.tokens.string(), encoder);
   text::Vocab vocab;
   if (embeddings) {
     const TextEmbInfo& e = ds.text_emb();
-    if (!ds.has_text_emb())
-      fail("{}: was trained on text embeddings of {}, but {} has none (gaia text embed)", opt.init.string(),
-           init_info.text_encoder, opt.tokens.string());
-    if (init && init_info.text_encoder != e.encoder)
-      fail("{}: was trained on text embeddings of {}, but {} has embeddings of {}", opt.init.string(),
-           init_info.text_encoder, opt.tokens.string(), e.encoder);
+    if (init && e.m != init_info.config.world.text_tokens)
+      fail("{}: reads m = {} text tokens per step, but {}'s embeddings have m = {} (gaia text embed {} --m {})",
+           opt.init.string(), init_info.config.world.text_tokens, opt.tokens.string(), e.m, opt.tokens.string(),
+           init_info.config.world.text_tokens);
     if (wc.text_tokens != e.m || wc.text_dim != e.dim)
       note(fmt::format("text: {}'s embeddings of {} set world.text_tokens = {} and world.text_dim = {} (config: {}, {})",
                        opt.tokens.string(), e.encoder, e.m, e.dim, wc.text_tokens, wc.text_dim));
     cfg.world.text_tokens = int(e.m);
     cfg.world.text_dim = int(e.dim);
-  } else if (init) {
+  } else if (init && !fresh_text) {
     vocab = init_info.vocab;
-    if (ds.has_text_emb()) note(fmt::format("text: {} was trained on words; the dataset's embeddings are not used", opt.init.string()));
+    if (ds.has_text_emb() && opt.text == Text::Auto)
+      note(fmt::format("text: {} was trained on words; the dataset's embeddings are not used", opt.init.string()));
   } else if (ds.has_captions()) {
     vocab = build_vocab(ds, train_eps, wc.text_vocab);
   }
+  if (fresh_text)
+    note(fmt::format("text: the text path (word_embedding, text_proj) starts afresh for {} ({} read {})",
+                     embeddings ? "embeddings of " + encoder : std::string("the built-in words"), opt.init.string(),
+                     init_info.embeds_text() ? "embeddings of " + init_info.text_encoder : std::string("words")));
   const TextSource text = embeddings ? TextSource::precomputed() : TextSource(ds.has_captions() ? &vocab : nullptr);
   if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
@@ -126,7 +140,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   const int total = opt.steps > 0 ? opt.steps : wc.steps;
   train::WarmupCosine sched{wc.lr, wc.lr * wc.final_lr_ratio, wc.warmup_steps, total};
   WorldInfo info{cfg, ds.grid_h(), ds.grid_w(), ds.codebook_size(), vocab};
-  if (embeddings) info.text_encoder = ds.text_emb().encoder;
+  info.text_encoder = encoder;
   {
     int64_t steps = 0, with = 0;
     for (size_t e : train_eps) {
@@ -151,9 +165,12 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   } else if (init) {
     // Fresh optimiser and schedule. Action MLPs the --init model lacks start at zero output (model.cpp), so a
     // linear-action model fine-tunes into one with world.action_mlp > 0 from where it was.
-    const auto dropped = train::init_from(*model, *init, opt.init, [](const std::string& k) {
-      return k.rfind("speed_mlp.", 0) == 0 || k.rfind("curvature_mlp.", 0) == 0;
-    });
+    const auto dropped = train::init_from(
+        *model, *init, opt.init,
+        [](const std::string& k) { return k.rfind("speed_mlp.", 0) == 0 || k.rfind("curvature_mlp.", 0) == 0; },
+        [&](const std::string& k) {
+          return fresh_text && (k.rfind("word_embedding.", 0) == 0 || k.rfind("text_proj.", 0) == 0);
+        });
     note("initialised from " + opt.init.string());
     if (!dropped.empty()) note(dropped);
   }

@@ -20,6 +20,14 @@ struct WorldTrainOptions {
                               // (best validation, with best.json), OUT/metrics.jsonl
   TokenFormat format;         // for other tokenizers' files; K unstated = the config's tokenizer.codebook_size
   fs::path init;              // fine-tuning: start from these weights (and keep their text vocabulary)
+  // The text the model reads (§2.1). Auto: --init's kind, else the dataset's embeddings where it has them, else
+  // the built-in words. Words: the built-in words even when the dataset has embeddings. Embeddings: the dataset's
+  // (gaia text embed, or made elsewhere).
+  enum class Text { Auto, Words, Embeddings };
+  Text text = Text::Auto;
+  // Fine-tuning: the text path (word_embedding, text_proj) starts afresh instead of from --init, with a vocabulary
+  // of this dataset's words. Implied when `text` gives the model another text than --init's (another encoder).
+  bool fresh_text = false;
   int steps = -1;             // -1: config world.steps
   int val_every = 250;
   size_t val_windows = 64;    // held-out windows scored at each validation
