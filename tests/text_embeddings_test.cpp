@@ -202,8 +202,11 @@ TEST(TextEmbeddings, FineTuneLearnsTheTextPathAfresh) {
   using Text = world::WorldTrainOptions::Text;
   test::TempDir dir;
   const fs::path root = make_embedded(dir);
-  auto train = [&](const fs::path& out, Text text, const fs::path& init = {}, bool fresh = false) {
+  std::vector<double> kl;  // the distillation term of each step
+  auto train = [&](const fs::path& out, Text text, const fs::path& init = {}, bool fresh = false,
+                   const fs::path& teacher = {}) {
     world::WorldTrainOptions o;
+    o.distill_from = teacher;
     o.tokens = root;
     o.out = out;
     o.steps = 2;
@@ -213,7 +216,8 @@ TEST(TextEmbeddings, FineTuneLearnsTheTextPathAfresh) {
     o.fresh_text = fresh;
     // Only the text path trains: what the fine-tune took from --init stays exactly --init's.
     if (!init.empty()) o.train_only = {"text_proj", "word_embedding"};
-    return world::train_world(tiny_config(), o);
+    kl.clear();
+    return world::train_world(tiny_config(), o, [&](const world::WorldStepLog& l) { kl.push_back(l.distill); });
   };
   train(dir / "words", Text::Words);  // the dataset has embeddings; the built-in words are asked for
   world::WorldInfo wi;
@@ -236,6 +240,22 @@ TEST(TextEmbeddings, FineTuneLearnsTheTextPathAfresh) {
   world::WorldModel fresh(ei.config.world, ei.n(), ei.K);
   EXPECT_TRUE(torch::equal(emb->word_embedding->weight, fresh->word_embedding->weight));  // unused by embeddings
   EXPECT_FALSE(torch::allclose(emb->text_proj->weight, fresh->text_proj->weight));         // trained from fresh
+
+  // Taught by the words model (learning without forgetting across encoders): it reads its own words of the
+  // same captions, and the term is there from the first step (the fresh text path predicts otherwise).
+  r = train(dir / "taught", Text::Embeddings, dir / "words" / "world.safetensors", false, dir / "words" / "world.safetensors");
+  said = false;
+  for (auto& n : r.notes) said |= n.find("reads its own words of the captions") != std::string::npos;
+  EXPECT_TRUE(said);
+  ASSERT_EQ(kl.size(), 2u);
+  for (double v : kl) EXPECT_TRUE(std::isfinite(v) && v >= 0) << v;
+  EXPECT_GT(kl[0] + kl[1], 0.0);
+  // A teacher that reads another encoder's embeddings cannot be given them.
+  world::write_text_emb_info(root, {"another-encoder", kM, kDim});
+  EXPECT_NE(test::error_of([&] { train(dir / "x0", Text::Embeddings, {}, false, dir / "to-emb" / "world.safetensors"); })
+                .find("reads text embeddings of test-encoder, but this run's batches carry embeddings of another-encoder"),
+            std::string::npos);
+  world::write_text_emb_info(root, {"test-encoder", kM, kDim});
 
   // Back to words, afresh: the vocabulary is this dataset's, the word table starts as a fresh model's.
   r = train(dir / "back", Text::Words, dir / "to-emb" / "world.safetensors");

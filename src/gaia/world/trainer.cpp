@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <fstream>
 
 #include <torch/version.h>
@@ -175,8 +176,12 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     if (!dropped.empty()) note(dropped);
   }
   init = nullptr;
-  // The teacher of distillation: same token grid and codebook, and the same words for the same text ids.
+  // The teacher of distillation: same token grid and codebook. It reads text as it was trained to: this run's
+  // batches when they carry its text, else its own words of the same captions (a model learning another text
+  // encoder keeps the text behaviour of one trained on words), drawn with the same windows and masks.
   WorldModel teacher{nullptr};
+  text::Vocab teacher_vocab;
+  std::optional<WorldConfig> teacher_words;  // set: the teacher's batches carry its own words (its m)
   if (!opt.distill_from.empty()) {
     if (!(opt.distill_weight > 0 && std::isfinite(opt.distill_weight)))
       fail("--distill-weight must be a positive number, got {}", opt.distill_weight);
@@ -185,9 +190,21 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     if (ti.grid_h != ds.grid_h() || ti.grid_w != ds.grid_w() || ti.K != ds.codebook_size())
       fail("{}: a {}x{} token grid with K = {}, but {} has {}x{} with K = {}", opt.distill_from.string(), ti.grid_h,
            ti.grid_w, ti.K, opt.tokens.string(), ds.grid_h(), ds.grid_w(), ds.codebook_size());
-    if (!(ti.vocab == vocab) || ti.text_encoder != info.text_encoder)
-      fail("{}: its text vocabulary differs from this run's (distil from the --init weights, or weights with their "
-           "vocabulary)", opt.distill_from.string());
+    if (ti.embeds_text() && ti.text_encoder != info.text_encoder)
+      fail("{}: reads text embeddings of {}, but this run's batches carry {} (distil from weights that read the "
+           "built-in words or this run's embeddings)", opt.distill_from.string(), ti.text_encoder,
+           info.embeds_text() ? "embeddings of " + info.text_encoder : std::string("words"));
+    if (!ti.embeds_text() && (!(ti.vocab == vocab) || info.embeds_text())) {
+      if (ti.vocab.size() <= 2 || !ds.has_captions())
+        fail("{}: its text vocabulary differs from this run's, and {} (distil from the --init weights, or weights "
+             "with their vocabulary)", opt.distill_from.string(),
+             ds.has_captions() ? "it has no words" : opt.tokens.string() + " has no captions to give it its own");
+      teacher_vocab = ti.vocab;
+      teacher_words = wc;
+      teacher_words->text_tokens = ti.config.world.text_tokens;
+      note(fmt::format("text: {} reads its own words of the captions ({} words)", opt.distill_from.string(),
+                       ti.vocab.size()));
+    }
     // Its prediction as the run's model would make it: the same copy logit (a calibrated teacher carries its own).
     teacher->cfg.copy_bias = wc.copy_bias;
     teacher->eval();
@@ -260,6 +277,9 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     auto t0 = std::chrono::steady_clock::now();
     // The whole step's batch on every rank; each takes its own micro-batches of it.
     auto whole = training_batch(ds, sampler, text, wc, cfg.run.seed, step);
+    const auto teacher_whole =
+        teacher_words ? training_batch(ds, sampler, TextSource(&teacher_vocab), *teacher_words, cfg.run.seed, step)
+                      : whole;
     const double lr = sched(step);
     optim.set_lr(lr);
     optim.zero_grad();
@@ -267,6 +287,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     for (int k = 0; k < accumulate; ++k) {
       const int64_t b0 = opt.parallel.micro_offset(wc.batch_size, k);
       auto batch = whole.examples(b0, b0 + micro).to(dev);
+      const auto teacher_batch = teacher_words ? teacher_whole.examples(b0, b0 + micro).to(dev) : batch;
       torch::manual_seed(train::step_seed(cfg.run.seed, step, 1 + opt.parallel.micro_stream(k)));
       torch::Tensor loss;
       {
@@ -274,7 +295,8 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
         auto logits = model->forward(batch);
         loss = image_token_loss(logits, batch.tokens);
         lv += loss.item<double>() / accumulate;  // logged: the cross-entropy alone, comparable with runs without a teacher
-        // The KL term to the teacher on the examples `keep` of batch b, added to the loss; returns its value.
+        // The KL term to the teacher, which reads b (the batch with the teacher's text), on the examples `keep`,
+        // added to the loss; returns its value.
         auto distil = [&](const WorldBatch& b, const torch::Tensor& student, const torch::Tensor& keep) {
           torch::Tensor tl;
           {
@@ -290,11 +312,12 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
         };
         // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
         if (teacher && !batch.use_action.all().item<bool>())
-          kl += distil(batch, logits, batch.use_action.logical_not()) / accumulate;
+          kl += distil(teacher_batch, logits, batch.use_action.logical_not()) / accumulate;
         if (teacher && opt.distill_other_text) {
           // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
-          auto other = batch.with_rolled_text(std::max<int64_t>(1, batch.batch() / 2));
-          kl_other += distil(other, model->forward(other), other.use_text) / accumulate;
+          const int64_t half = std::max<int64_t>(1, batch.batch() / 2);
+          auto other = batch.with_rolled_text(half);
+          kl_other += distil(teacher_batch.with_rolled_text(half), model->forward(other), other.use_text) / accumulate;
         }
       }
       // Equal micro-batches: the mean of their mean losses is the whole batch's. fp16 scales the loss.

@@ -39,6 +39,8 @@ struct WorldTrainOptions {
   // Learning without forgetting (world/distill.h): every example that is not action-conditioned adds
   // distill_weight x KL(these weights' prediction || the model's) per image token, so a fine-tune for action
   // control keeps the text-conditioned and unconditional predictions that text guidance mixes. Empty = off.
+  // A teacher trained on words may teach a model that reads embeddings (a fine-tune to another text encoder):
+  // it reads its own words of the same captions.
   fs::path distill_from;
   double distill_weight = 1.0;
   // Also hold the text-conditioned prediction under another example's caption (WorldBatch::with_rolled_text, half
