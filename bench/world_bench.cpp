@@ -125,6 +125,41 @@ static void BM_SessionFrame(benchmark::State& st) {
 }
 BENCHMARK(BM_SessionFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
+// A planner's candidates (SimSession::fork with plans): 4 branches of 8 frames from one full-context state of one
+// session, at one intra-op thread as gaia sim runs. Arg 0: four forks stepped one after another (the baseline, and
+// what SimSession::fork does on the CPU); arg 1: the four as one batch (RolloutStepper::repeat). Counter: generated frames per second over all branches.
+static void BM_SessionBranches(benchmark::State& st) {
+  Config c = bench_config();
+  const int before = at::get_num_threads();
+  set_torch_threads(1);
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  const int64_t P = c.world.context_steps - 1, branches = 4, frames = 8;
+  RolloutPrompt p;
+  p.tokens = torch::randint(0, c.tokenizer.codebook_size, {P, c.image_tokens()}, torch::kLong);
+  RolloutOptions o;
+  RolloutStepper session(m, o, 1);
+  for (int64_t k = 0; k < P; ++k) session.step(p, p.tokens[k]);
+  const bool batched = st.range(0) == 1;
+  for (auto _ : st) {
+    if (batched) {
+      auto b = session.repeat(branches);
+      for (int64_t f = 0; f < frames; ++f) b.step(p);
+      benchmark::DoNotOptimize(b.tokens());
+    } else {
+      for (int64_t i = 0; i < branches; ++i) {
+        auto b = session.fork();
+        for (int64_t f = 0; f < frames; ++f) b.step(p);
+        benchmark::DoNotOptimize(b.tokens());
+      }
+    }
+  }
+  st.counters["frames/s"] = benchmark::Counter(double(branches * frames) * st.iterations(), benchmark::Counter::kIsRate);
+  st.SetLabel(batched ? "4 branches as one batch" : "4 forks one after another (baseline)");
+  set_torch_threads(before);
+}
+BENCHMARK(BM_SessionBranches)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
 // N futures in one batch (what `gaia eval` and `--futures N` do): one decoding step serves every row, so the
 // per-token dispatch cost is shared.
 static void BM_RolloutBatched(benchmark::State& st) { run_rollouts(st, 1, st.range(0), 1); }

@@ -296,3 +296,114 @@ TEST(SimHub, EachStepReadsBackItsLastFrames) {
   id = early.handle("create", nlohmann::json::object()).body["session"];
   EXPECT_FALSE(early.handle("step", {{"session", id}}).body.contains("read_back"));  // one frame so far
 }
+
+// fork(plans): one copy per plan, stepped along it as one batch (or one by one). With one plan the copy's frames are
+// fork() + step()'s (the same random stream, past the window); with several (argmax, so that no draw depends on the
+// batch) each copy is what a fork stepped alone along its plan gives; the parent is unchanged and the copies go on
+// stepping.
+TEST(SimSession, ForkAlongPlansStepsTheCopiesAsOneBatch) {
+  Fixture f;
+  const int64_t T = f.model->layout.T;
+  for (const std::string sampling : {"top-k", "argmax"}) {
+    SCOPED_TRACE(sampling);
+    sim::SessionSettings s;
+    s.seed = 6;
+    s.sampling = sampling;
+    sim::SimSession a(f.model, f.info, s);
+    torch::manual_seed(8);
+    a.start(torch::randint(0, kK, {2, kN}, torch::kLong), torch::tensor({{7.0f, 0.0f}, {7.0f, 0.001f}}), "rain");
+    a.step({8, 0.01});
+    const auto before = a.tokens().clone();
+    std::vector<std::vector<sim::Action>> plans;
+    const size_t branches = sampling == "argmax" ? 3 : 1;
+    for (size_t b = 0; b < branches; ++b) {
+      plans.emplace_back();
+      for (int64_t k = 0; k < T + 2; ++k)  // past the window
+        plans.back().push_back({6.0 + double(b), (b % 2 ? -0.01 : 0.02) * double(k % 3)});
+    }
+    auto copies = a.fork(plans, std::string("night"), sim::SimSession::Branching::Batched);
+    ASSERT_EQ(copies.size(), branches);
+    auto one_by_one = a.fork(plans, std::string("night"), sim::SimSession::Branching::OneByOne);
+    EXPECT_TRUE(torch::equal(a.tokens(), before));  // the parent is as it was
+    EXPECT_EQ(a.text(), "rain");
+    for (size_t b = 0; b < branches; ++b) {
+      auto alone = a.fork();
+      for (const auto& act : plans[b]) alone.step(act, std::string("night"));
+      EXPECT_EQ(copies[b].steps(), a.steps() + T + 2);
+      EXPECT_EQ(copies[b].text(), "night");
+      EXPECT_TRUE(torch::equal(copies[b].tokens(), alone.tokens())) << "plan " << b;
+      EXPECT_TRUE(torch::equal(one_by_one[b].tokens(), alone.tokens())) << "plan " << b;
+      // The copy is a session of its own from here on.
+      EXPECT_TRUE(torch::equal(copies[b].step({5, 0}), alone.step({5, 0}))) << "plan " << b;
+    }
+  }
+  sim::SimSession a(f.model, f.info, {});
+  a.start(torch::zeros({1, kN}, torch::kLong));
+  using Plans = std::vector<std::vector<sim::Action>>;
+  EXPECT_NE(test::error_of([&] { a.fork(Plans{}); }).find("at least one plan"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { a.fork(Plans{{{8, 0}}, {{8, 0}, {8, 0}}}); }).find("same number of steps"),
+            std::string::npos);
+  EXPECT_NE(test::error_of([&] { a.fork(Plans{{{8, 0.9}}}); }).find("curvature"), std::string::npos);
+  EXPECT_EQ(a.steps(), 1);
+}
+
+// The protocol's fork with "plans": each branch's frames (tokens, the last frame, in order), as sessions of their own
+// unless "open" is false; a batch that would not fit is a 429 that opens none, a bad plan a 400.
+TEST(SimHub, ForkWithPlansAnswersEachBranch) {
+  Fixture f;
+  sim::SessionHub hub(f.model, f.info, {3, 0, 600}, {}, [](const torch::Tensor& t, const std::string& format) {
+    return nlohmann::json::array({format, t.sum().item<int64_t>()});
+  });
+  auto r = hub.handle("create", {{"prompt", raw_prompt(2)}, {"seed", 2}, {"sampling", "argmax"}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  const auto id = r.body["session"].get<int64_t>();
+  const nlohmann::json plans = {{{8, 0.02}, {8, 0.02}, {8, 0.02}}, {{5, -0.02}, {5, nullptr}, {5, -0.02}}};
+  r = hub.handle("fork", {{"session", id}, {"plans", plans}, {"frame", "jpeg"}, {"open", false}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  ASSERT_EQ(r.body["branches"].size(), 2u);
+  EXPECT_EQ(hub.sessions(), 1u);  // none opened
+  const auto closed_first = r.body["branches"][0];
+  r = hub.handle("fork", {{"session", id}, {"plans", plans}, {"frame", true}});
+  ASSERT_EQ(r.status, 200) << r.body.dump();
+  EXPECT_EQ(hub.sessions(), 3u);
+  EXPECT_EQ(r.body["forked_from"], id);
+  for (size_t b = 0; b < 2; ++b) {
+    const auto& one = r.body["branches"][b];
+    ASSERT_EQ(one["tokens"].size(), 3u);
+    EXPECT_EQ(one["steps"], 5);
+    auto mine = one["session"].get<int64_t>();
+    auto next = hub.handle("step", {{"session", mine}, {"speed", 8}});
+    ASSERT_EQ(next.status, 200) << next.body.dump();
+    EXPECT_EQ(next.body["step"], 5);
+    const auto last = one["tokens"][2].get<std::vector<int64_t>>();
+    int64_t sum = 0;
+    for (auto x : last) sum += x;
+    EXPECT_EQ(one["frame"], nlohmann::json::array({"png", sum}));
+  }
+  EXPECT_EQ(r.body["branches"][0]["tokens"], closed_first["tokens"]);  // open or not, the same batch
+  const auto opened = r.body;
+  // The parent, unchanged by the forks, stepped along plan 1 itself (argmax: the same frames as its branch).
+  for (size_t k = 0; k < 3; ++k) {
+    const auto& a = plans[1][k];
+    nlohmann::json step{{"session", id}, {"speed", a[0]}};
+    if (!a[1].is_null()) step["curvature"] = a[1];
+    auto one = hub.handle("step", step);
+    ASSERT_EQ(one.status, 200) << one.body.dump();
+    EXPECT_EQ(one.body["tokens"], opened["branches"][1]["tokens"][k]) << k;
+  }
+  const std::vector<std::tuple<nlohmann::json, int, std::string>> bad = {
+      {{{"session", id}, {"plans", plans}}, 429, "close some first"},  // 3 open, 2 more
+      {{{"session", id}, {"plans", nlohmann::json::array()}, {"open", false}}, 400, "1 to 16 plans"},
+      {{{"session", id}, {"plans", {{{8, 0.9}}}}, {"open", false}}, 400, "'plans[0][0]': curvature"},
+      {{{"session", id}, {"plans", {{{8, "x"}}}}, {"open", false}}, 400, "'plans[0][0][1]' must be a number"},
+      {{{"session", id}, {"plans", {{{8, 0}}, {{8, 0}, {8, 0}}}}, {"open", false}}, 400, "same number of steps"},
+      {{{"session", 42}, {"plans", {{{8, 0}}}}, {"open", false}}, 404, "no session 42"},
+      {{{"session", id}, {"plans", {{{8, 0}}}}, {"depth", 2}}, 400, "unknown field 'depth'"},
+  };
+  for (const auto& [req, status, words] : bad) {
+    r = hub.handle("fork", req);
+    EXPECT_EQ(r.status, status) << req.dump() << ": " << r.body.dump();
+    EXPECT_NE(r.body["error"].get<std::string>().find(words), std::string::npos) << r.body.dump();
+  }
+  EXPECT_EQ(hub.sessions(), 3u);
+}

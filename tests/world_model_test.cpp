@@ -178,7 +178,7 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
   const TokenStep fast(*m);
   EXPECT_TRUE(TokenStep::applies(*m, 2));
   EXPECT_FALSE(TokenStep::applies(*m, 64));
-  for (int64_t B : {1, 2}) {
+  for (int64_t B : {1, 2, 3, 4}) {
     auto b = random_batch(c, B, 2);
     auto x = m->embed(b);  // a prefix of two whole steps
     auto general = m->make_cache(B, m->layout.length()), fused = m->make_cache(B, m->layout.length());
@@ -204,6 +204,26 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
       auto gk = general.k[l].narrow(3, 0, n), gv = general.v[l].narrow(2, 0, n);
       EXPECT_LT((fused.k[l].narrow(3, 0, n) - gk).abs().max().item<double>() / gk.abs().max().item<double>(), 1e-5);
       EXPECT_LT((fused.v[l].narrow(2, 0, n) - gv).abs().max().item<double>() / gv.abs().max().item<double>(), 1e-5);
+    }
+  }
+  // Rows of a batch get exactly the numbers they get alone (each output sums its inputs in the same order).
+  {
+    auto b = random_batch(c, 4, 2);
+    auto x = m->embed(b);
+    auto batch = m->make_cache(4, m->layout.length());
+    m->body(x, &batch);
+    auto tok = torch::randint(0, kK, {4}, torch::kLong);
+    std::vector<KVCache> alone(4);
+    for (int64_t r = 0; r < 4; ++r) {  // the batch's own prefix, row r
+      alone[size_t(r)] = batch;
+      for (auto* layers : {&alone[size_t(r)].k, &alone[size_t(r)].v})
+        for (auto& t : *layers) t = t.narrow(0, r, 1).clone();
+    }
+    for (int64_t i = 0; i < 3; ++i) {
+      auto together = fast.logits(tok, 2, i, batch);
+      for (int64_t r = 0; r < 4; ++r)
+        EXPECT_TRUE(torch::equal(together[r], fast.logits(tok.narrow(0, r, 1), 2, i, alone[size_t(r)])[0]))
+            << "row " << r << " token " << i;
     }
   }
   auto small = m->make_cache(1, 3);

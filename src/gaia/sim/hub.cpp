@@ -83,7 +83,49 @@ struct Fields {
     if (!r.at(k).is_boolean()) fail("'{}' must be true or false", k);
     return r.at(k).get<bool>();
   }
+  // "frame": true or "png" (lossless), "jpeg" (smaller, lossy), false or none ("")
+  std::string frame_format() const {
+    if (has("frame") && r.at("frame").is_string()) {
+      auto f = r.at("frame").get<std::string>();
+      if (f != "png" && f != "jpeg") fail("'frame' must be true, false, \"png\" or \"jpeg\"");
+      return f;
+    }
+    if (has("frame") && !r.at("frame").is_boolean()) fail("'frame' must be true, false, \"png\" or \"jpeg\"");
+    return flag("frame", false) ? "png" : "";
+  }
 };
+
+json ids_of(const torch::Tensor& tokens) {  // [n] -> a list of ids
+  auto t = tokens.contiguous();
+  return std::vector<int64_t>(t.data_ptr<int64_t>(), t.data_ptr<int64_t>() + t.numel());
+}
+
+// "plans": [[[speed, curvature] x steps] x branches] (null: no command), at most 16 branches of 64 steps.
+std::vector<std::vector<Action>> plans_of(const json& p) {
+  if (!p.is_array() || p.empty() || p.size() > 16) fail("'plans' must be a list of 1 to 16 plans");
+  std::vector<std::vector<Action>> plans;
+  for (size_t i = 0; i < p.size(); ++i) {
+    if (!p[i].is_array() || p[i].empty() || p[i].size() > 64)
+      fail("'plans[{}]' must be a list of 1 to 64 [speed, curvature] steps", i);
+    plans.emplace_back();
+    for (size_t j = 0; j < p[i].size(); ++j) {
+      const auto& a = p[i][j];
+      if (!a.is_array() || a.size() != 2) fail("'plans[{}][{}]' must be [speed, curvature]", i, j);
+      double v[2];
+      for (size_t k = 0; k < 2; ++k) {
+        if (!a[k].is_null() && !a[k].is_number()) fail("'plans[{}][{}][{}]' must be a number or null", i, j, k);
+        v[k] = a[k].is_null() ? std::numeric_limits<double>::quiet_NaN() : a[k].get<double>();
+      }
+      plans.back().push_back({v[0], v[1]});
+      try {
+        check_action(plans.back().back());
+      } catch (const std::exception& e) {
+        fail("'plans[{}][{}]': {}", i, j, e.what());
+      }
+    }
+  }
+  return plans;
+}
 
 }  // namespace
 
@@ -106,18 +148,34 @@ void SessionHub::expire() {
   }
 }
 
-HubReply SessionHub::add(std::unique_ptr<SimSession> s, json body) {
+HubReply SessionHub::add_all(std::vector<std::unique_ptr<SimSession>> s, std::vector<int64_t>* ids) {
   std::lock_guard<std::mutex> g(lock_);
   expire();
-  if (int(sessions_.size()) >= limits_.max_sessions)
-    return error(429, fmt::format("{} sessions are open, the most this server takes: close one first", sessions_.size()));
-  auto e = std::make_shared<Entry>();
-  e->session = std::move(s);
-  e->used = std::chrono::steady_clock::now();
-  const int64_t id = next_id_++;
-  body["session"] = id;
-  body["steps"] = e->session->steps();
-  sessions_[id] = e;
+  if (int(sessions_.size() + s.size()) > limits_.max_sessions)
+    return error(429, s.size() == 1 ? fmt::format("{} sessions are open, the most this server takes: close one first",
+                                                  sessions_.size())
+                                    : fmt::format("{} sessions are open and {} more asked for; this server takes at "
+                                                  "most {}: close some first", sessions_.size(), s.size(),
+                                                  limits_.max_sessions));
+  for (auto& session : s) {
+    auto e = std::make_shared<Entry>();
+    e->session = std::move(session);
+    e->used = std::chrono::steady_clock::now();
+    ids->push_back(next_id_++);
+    sessions_[ids->back()] = e;
+  }
+  return {200, json::object()};
+}
+
+HubReply SessionHub::add(std::unique_ptr<SimSession> s, json body) {
+  const int64_t steps = s->steps();
+  std::vector<std::unique_ptr<SimSession>> one;
+  one.push_back(std::move(s));
+  std::vector<int64_t> ids;
+  auto reply = add_all(std::move(one), &ids);
+  if (reply.status != 200) return reply;
+  body["session"] = ids[0];
+  body["steps"] = steps;
   return {200, body};
 }
 
@@ -178,6 +236,54 @@ HubReply SessionHub::with_session(const json& r, const std::function<HubReply(En
   return f(*e, id);
 }
 
+HubReply SessionHub::branch(const json& r) {
+  Fields f{r};
+  f.only({"session", "plans", "text", "open", "frame", "tokens"});
+  const auto plans = plans_of(r.at("plans"));
+  std::optional<std::string> text;
+  if (f.has("text")) text = f.text("text", "");
+  const bool open = f.flag("open", true), want_tokens = f.flag("tokens", true);
+  const std::string frame_format = f.frame_format();
+  if (open) {  // fail early, before the work; add_all checks again
+    std::lock_guard<std::mutex> g(lock_);
+    if (int(sessions_.size() + plans.size()) > limits_.max_sessions)
+      return error(429, fmt::format("{} sessions are open and {} more asked for; this server takes at most {}: close "
+                                    "some first, or fork with \"open\": false", sessions_.size(), plans.size(),
+                                    limits_.max_sessions));
+  }
+  std::vector<SimSession> branches;
+  json body{{"branches", json::array()}};
+  auto reply = with_session(r, [&](Entry& e, int64_t id) {
+    body["forked_from"] = id;
+    const auto t0 = std::chrono::steady_clock::now();
+    branches = e.session->fork(plans, text);
+    body["ms"] = 1000 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return HubReply{200, json::object()};
+  });
+  if (reply.status != 200) return reply;
+  const int64_t h = int64_t(plans[0].size()), K = read_back_.frames;
+  for (auto& b : branches) {
+    const auto all = b.tokens();  // [steps, n]
+    json one{{"steps", b.steps()}};
+    if (want_tokens) {
+      one["tokens"] = json::array();
+      for (int64_t j = all.size(0) - h; j < all.size(0); ++j) one["tokens"].push_back(ids_of(all[j]));
+    }
+    if (!frame_format.empty()) one["frame"] = frames_ ? frames_(all[all.size(0) - 1], frame_format) : json(nullptr);
+    if (read_back_.read && K > 0 && all.size(0) >= K) one["read_back"] = read_back_.read(all.narrow(0, all.size(0) - K, K));
+    body["branches"].push_back(one);
+  }
+  if (open) {
+    std::vector<std::unique_ptr<SimSession>> s;
+    for (auto& b : branches) s.push_back(std::make_unique<SimSession>(std::move(b)));
+    std::vector<int64_t> ids;
+    auto added = add_all(std::move(s), &ids);
+    if (added.status != 200) return added;
+    for (size_t i = 0; i < ids.size(); ++i) body["branches"][i]["session"] = ids[i];
+  }
+  return {200, body};
+}
+
 HubReply SessionHub::handle(const std::string& op, const json& r) {
   try {
     if (op == "create") return create(r);
@@ -207,22 +313,13 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
           text = std::move(e.command_text);
           e.command_text.reset();
         }
-        // "frame": true or "png" (lossless), "jpeg" (smaller, lossy), false (none)
-        std::string frame_format;
-        if (f.has("frame") && r.at("frame").is_string()) {
-          frame_format = r.at("frame").get<std::string>();
-          if (frame_format != "png" && frame_format != "jpeg") fail("'frame' must be true, false, \"png\" or \"jpeg\"");
-        } else if (f.has("frame") && !r.at("frame").is_boolean()) {
-          fail("'frame' must be true, false, \"png\" or \"jpeg\"");
-        } else if (f.flag("frame", false)) {
-          frame_format = "png";
-        }
+        const std::string frame_format = f.frame_format();
         const bool want_tokens = f.flag("tokens", true);
         const auto t0 = std::chrono::steady_clock::now();
         auto tokens = e.session->step(a, text);
         json body{{"session", id}, {"step", e.session->steps() - 1}, {"text", e.session->text()}};
         if (op == "drive") body["command"] = {{"speed", a.speed}, {"curvature", a.curvature}};
-        if (want_tokens) body["tokens"] = std::vector<int64_t>(tokens.data_ptr<int64_t>(), tokens.data_ptr<int64_t>() + tokens.numel());
+        if (want_tokens) body["tokens"] = ids_of(tokens);
         if (!frame_format.empty()) body["frame"] = frames_ ? frames_(tokens, frame_format) : json(nullptr);
         const int64_t K = read_back_.frames, steps = e.session->steps();
         if (read_back_.read && K > 0 && steps >= K) body["read_back"] = read_back_.read(e.session->tokens().narrow(0, steps - K, K));
@@ -246,6 +343,7 @@ HubReply SessionHub::handle(const std::string& op, const json& r) {
       it->second->used = std::chrono::steady_clock::now();
       return {200, json{{"session", id}, {"command", {{"speed", a.speed}, {"curvature", a.curvature}}}}};
     }
+    if (op == "fork" && r.is_object() && r.contains("plans")) return branch(r);
     if (op == "fork") {
       std::unique_ptr<SimSession> copy;
       auto r1 = with_session(r, [&](Entry& e, int64_t) {

@@ -11,6 +11,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -50,7 +51,8 @@ class SessionHub {
   // `text`: the sessions' text encoder (SimSession; shared by all, so it must be thread-safe).
   SessionHub(world::WorldModel& model, const world::WorldInfo& info, const HubLimits& limits, PromptSource prompts,
              FrameEncoder frames = {}, ReadBack read_back = {}, std::shared_ptr<text::TextEncoder> text = {});
-  // op: create | step | command | drive | fork | reset | close | status. "command" sets a session's standing action
+  // op: create | step | command | drive | fork | reset | close | status. "fork" with "plans" steps one copy per
+  // plan as one batch (SimSession::fork) and answers each copy's frames. "command" sets a session's standing action
   // (answered at once, even while it steps) and "drive" steps it with that: continuous driving, as the stream does.
   HubReply handle(const std::string& op, const nlohmann::json& request);
   size_t sessions() const;
@@ -79,6 +81,9 @@ class SessionHub {
   HubReply create(const nlohmann::json& r);
   HubReply with_session(const nlohmann::json& r, const std::function<HubReply(Entry&, int64_t id)>& f);
   HubReply add(std::unique_ptr<SimSession> s, nlohmann::json body);
+  // Opens all of `s` or none (a 429 when they do not fit); their ids, in order, into `ids`.
+  HubReply add_all(std::vector<std::unique_ptr<SimSession>> s, std::vector<int64_t>* ids);
+  HubReply branch(const nlohmann::json& r);  // "fork" with "plans"
 };
 
 }  // namespace gaia::sim

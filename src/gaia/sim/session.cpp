@@ -80,7 +80,7 @@ void SimSession::reset() {
   if (!text_.empty()) {
     text_rows() = world::repeat_rows(text_row(text_), P_);
   }
-  stepper_.emplace(*model_, o_, 1);
+  stepper_ = std::make_shared<world::RolloutStepper>(*model_, o_, 1);
   for (int64_t k = 0; k < P_; ++k) stepper_->step(cond_, prompt_tokens_[k]);
 }
 
@@ -123,8 +123,50 @@ torch::Tensor SimSession::step(const Action& a, const std::optional<std::string>
 
 SimSession SimSession::fork() const {
   SimSession c(*this);
-  if (stepper_) c.stepper_.emplace(stepper_->fork());
+  if (stepper_) c.stepper_ = std::make_shared<world::RolloutStepper>(stepper_->fork());
   return c;  // the conditioning rows are replaced, never written in place, so sharing them is safe
+}
+
+std::vector<SimSession> SimSession::fork(const std::vector<std::vector<Action>>& plans,
+                                         const std::optional<std::string>& text, Branching how) const {
+  if (!stepper_) fail("a session forks after start()");
+  if (plans.empty()) fail("fork needs at least one plan");
+  const size_t h = plans[0].size();
+  for (size_t i = 0; i < plans.size(); ++i) {
+    if (plans[i].size() != h) fail("every plan needs the same number of steps (plan 0 has {}, plan {} has {})", h, i, plans[i].size());
+    for (const auto& a : plans[i]) check_action(a);
+  }
+  if (text && !text->empty()) text_row(*text);  // fails before anything is made
+  const bool cpu = (*model_)->token_embedding->weight.device().is_cpu();
+  std::vector<SimSession> out;
+  if (how == Branching::OneByOne || (how == Branching::Auto && cpu)) {
+    for (const auto& plan : plans) {
+      out.push_back(fork());
+      for (const auto& a : plan) out.back().step(a, text);
+    }
+    return out;
+  }
+  for (size_t i = 0; i < plans.size(); ++i) {
+    out.push_back(SimSession(*this));
+    if (text) out.back().text_ = *text;
+    for (const auto& a : plans[i]) out.back().append_row(a);
+  }
+  // Every branch's conditioning as one per-future prompt [plans, steps, ...] (the fields each branch has alike).
+  world::RolloutPrompt batch;
+  auto stack = [&](torch::Tensor world::RolloutPrompt::*field) {
+    if (!(out[0].cond_.*field).defined()) return;
+    std::vector<torch::Tensor> rows;
+    for (const auto& b : out) rows.push_back(b.cond_.*field);
+    batch.*field = torch::stack(rows);
+  };
+  for (auto f : {&world::RolloutPrompt::actions, &world::RolloutPrompt::negative_actions,
+                 &world::RolloutPrompt::text_ids, &world::RolloutPrompt::text_emb})
+    stack(f);
+  auto steps = stepper_->repeat(int64_t(plans.size()));
+  for (size_t j = 0; j < h; ++j) steps.step(batch);
+  for (size_t i = 0; i < out.size(); ++i)
+    out[i].stepper_ = std::make_shared<world::RolloutStepper>(steps.select(int64_t(i)));
+  return out;
 }
 
 torch::Tensor SimSession::tokens() const {

@@ -8,8 +8,10 @@
 // video code.
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <torch/torch.h>
 
@@ -55,6 +57,18 @@ class SimSession {
   // Back to the state start() left (the same random stream again).
   void reset();
   SimSession fork() const;
+  // A planner's candidates: one copy of this session per plan, each stepped along its plan (one action per step,
+  // all plans of one length, `text` as in step()); this session is unchanged. Batched, the plans' steps run as one
+  // batch of futures, each plan drawing from its own row of one random stream (with one plan: the frames of fork()
+  // then step()). One by one, each copy is fork() then step(). Auto batches where the rows share the work: on an
+  // accelerator; on the CPU each one-row copy has the fused token step and its lookahead, which a batch of rows
+  // does not beat (docs/benchmarks.md).
+  enum class Branching { Auto, Batched, OneByOne };
+  std::vector<SimSession> fork(const std::vector<std::vector<Action>>& plans,
+                               const std::optional<std::string>& text = std::nullopt,
+                               Branching how = Branching::Auto) const;
+  SimSession(SimSession&&) = default;
+  SimSession& operator=(SimSession&&) = default;
 
   int64_t steps() const { return stepper_ ? stepper_->steps() : 0; }  // prompt frames + generated frames
   int64_t prompt_frames() const { return P_; }
@@ -73,7 +87,9 @@ class SimSession {
   std::string prompt_text_, text_;
   int64_t P_ = 0;
   double kept_speed_ = 8.0;  // m/s: the counter-command's speed (the prompt's last, as gaia generate)
-  std::optional<world::RolloutStepper> stepper_;
+  std::shared_ptr<world::RolloutStepper> stepper_;
+
+  SimSession(const SimSession&) = default;  // shares the stepper: fork() replaces it at once
 
   void append_row(const Action& a);
   torch::Tensor text_row(const std::string& text) const;  // [m] word ids or [m, dim] embeddings

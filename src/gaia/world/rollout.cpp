@@ -299,6 +299,39 @@ RolloutStepper RolloutStepper::fork() const {
   return c;
 }
 
+RolloutStepper RolloutStepper::rows(const std::vector<int64_t>& futures) const {
+  RolloutStepper c(*this);  // waits for a lookahead job; the copies below own their tensors
+  const int64_t N = int64_t(futures.size());
+  std::vector<int64_t> idx(futures);
+  if (guided_)  // [cond x N | uncond x N]
+    for (int64_t f : futures) idx.push_back(N_ + f);
+  const auto index = torch::tensor(idx, torch::kLong).to(dev_);
+  auto take = [&](KVCache& cache) {
+    for (auto* layers : {&cache.k, &cache.v})
+      for (auto& t : *layers) t = t.index_select(0, index);
+  };
+  c.N_ = N;
+  c.tokens_ = tokens_.index_select(0, index);
+  take(c.cache_);
+  if (!c.ahead_.cache.k.empty()) take(c.ahead_.cache);
+  const int64_t B = int64_t(idx.size());
+  c.fast_ = o_.fused_tokens && TokenStep::applies(*model_, B) ? (fast_ ? fast_ : std::make_shared<const TokenStep>(*model_))
+                                                              : nullptr;
+  c.gen_ = gen_.clone();
+  return c;
+}
+
+RolloutStepper RolloutStepper::repeat(int64_t futures) const {
+  if (N_ != 1) fail("only a one-future rollout branches (this one has {} futures)", N_);
+  if (futures < 1) fail("branches need at least one future (got {})", futures);
+  return rows(std::vector<int64_t>(size_t(futures), 0));
+}
+
+RolloutStepper RolloutStepper::select(int64_t i) const {
+  if (i < 0 || i >= N_) fail("future {} is not among this rollout's {}", i, N_);
+  return rows({i});
+}
+
 RolloutResult rollout(WorldModel& model, const RolloutPrompt& prompt, const RolloutOptions& o,
                       const std::function<void(int, int)>& on_frame) {
   auto t_start = std::chrono::steady_clock::now();

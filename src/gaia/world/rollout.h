@@ -77,6 +77,11 @@ class RolloutStepper {
   int64_t generated() const { return generated_; }
   torch::Tensor tokens() const;        // [N, steps(), n] every step so far
   RolloutStepper fork() const;         // an independent copy: the same state, cache and random stream
+  // A planner's branches, batched: a stepper of `futures` rows that each continue this one-future stepper's state
+  // (its cache rows repeated), drawing from one copy of its random stream. With one row it is fork().
+  RolloutStepper repeat(int64_t futures) const;
+  // Future `i` alone, as a one-future stepper of its own (a copy of the random stream).
+  RolloutStepper select(int64_t i) const;
 
  private:
   WorldModel& model_;
@@ -86,7 +91,8 @@ class RolloutStepper {
   torch::Device dev_;
   at::Generator gen_;
   KVCache cache_;
-  std::shared_ptr<const TokenStep> fast_;  // sampling's per-token path where it applies (shared by forks)
+  std::shared_ptr<const TokenStep> fast_;
+  RolloutStepper rows(const std::vector<int64_t>& futures) const;  // repeat() and select(): these futures' rows  // sampling's per-token path where it applies (shared by forks)
   // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
   // ahead and the newest comes token by token: where the fused token step runs at one intra-op thread, a second
   // thread encodes the next window while the frame samples. A copy of the stepper waits for the job and gets its

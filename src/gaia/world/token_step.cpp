@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <vector>
 
 #include "gaia/core/error.h"
@@ -31,33 +32,58 @@ torch::Tensor packed(const torch::Tensor& w) {
   return torch::cat(parts).contiguous();
 }
 
-// y[b] = bias + x[b] W for B rows with W packed as above: 64 outputs at a time accumulate in registers, one broadcast
-// multiply-add per input over a contiguous slice (no horizontal sums, so it vectorises without reordering float
-// additions). A single token's products are bound by reading the weights, not by arithmetic.
-GAIA_SIMD_CLONES void linear_rows(const float* x, int64_t B, const float* wp, const float* bias, int64_t in,
-                                  int64_t out, float* y) {
-  const int64_t full = out / kLanes * kLanes, rest = out - full;
-  for (int64_t b = 0; b < B; ++b) {
-    const float* xb = x + b * in;
-    float* yb = y + b * out;
-    for (int64_t o0 = 0; o0 < full; o0 += kLanes) {
-      const float* blk = wp + o0 * in;  // [in][64]
-      float acc[kLanes];
-      for (int64_t o = 0; o < kLanes; ++o) acc[o] = bias ? bias[o0 + o] : 0.0f;
-      for (int64_t i = 0; i < in; ++i) {
-        const float xi = xb[i];
-        const float* row = blk + i * kLanes;
-        for (int64_t o = 0; o < kLanes; ++o) acc[o] += xi * row[o];
-      }
-      std::copy(acc, acc + kLanes, yb + o0);
+// Outputs [sub, sub + 8 V) of one packed block ([in][64], its bias and outputs at `bias` and `y`) for B rows, all
+// rows at once: each weight is read once for every row, and the B x V accumulators of 8 floats stay in registers.
+// One broadcast multiply and add per input over a contiguous slice (no horizontal sums): every output sums its
+// inputs in order, whatever B, so the rows of a batch get the numbers they would get alone.
+using Floats8 = float __attribute__((vector_size(32)));
+template <int B, int V>
+[[gnu::always_inline]] inline void block_rows(const float* x, int64_t in, const float* blk, int64_t sub,
+                                              const float* bias, float* y, int64_t out) {
+  Floats8 acc[B][V];
+  for (int b = 0; b < B; ++b)
+    for (int v = 0; v < V; ++v) {
+      if (bias) std::memcpy(&acc[b][v], bias + sub + 8 * v, sizeof(Floats8));
+      else acc[b][v] = Floats8{};
     }
-    const float* tail = wp + full * in;  // [in][rest]
-    for (int64_t o = 0; o < rest; ++o) {
-      float a = bias ? bias[full + o] : 0.0f;
-      for (int64_t i = 0; i < in; ++i) a += xb[i] * tail[i * rest + o];
-      yb[full + o] = a;
+  for (int64_t i = 0; i < in; ++i) {
+    const float* row = blk + i * kLanes + sub;
+    Floats8 xi[B];
+    for (int b = 0; b < B; ++b) xi[b] = Floats8{} + x[b * in + i];
+    for (int v = 0; v < V; ++v) {
+      Floats8 w;
+      std::memcpy(&w, row + 8 * v, sizeof(Floats8));
+      for (int b = 0; b < B; ++b) acc[b][v] += xi[b] * w;
     }
   }
+  for (int b = 0; b < B; ++b)
+    for (int v = 0; v < V; ++v) std::memcpy(y + b * out + sub + 8 * v, &acc[b][v], sizeof(Floats8));
+}
+
+// y[b] = bias + x[b] W for B <= kMaxRows rows with W packed as above. A single token's products are bound by
+// reading the weights, not by arithmetic, so rows share every read.
+GAIA_SIMD_CLONES void linear_rows(const float* x, int64_t B, const float* wp, const float* bias, int64_t in,
+                                  int64_t out, float* y) {
+  static_assert(kLanes == 64 && kMaxRows == 4, "block_rows splits a block of 64 outputs among up to 4 rows");
+  const int64_t full = out / kLanes * kLanes, rest = out - full;
+  for (int64_t o0 = 0; o0 < full; o0 += kLanes) {
+    const float* blk = wp + o0 * in;  // [in][64]
+    const float* bb = bias ? bias + o0 : nullptr;
+    float* yo = y + o0;
+    switch (B) {
+      case 1: block_rows<1, 8>(x, in, blk, 0, bb, yo, out); break;
+      case 2: for (int64_t sub = 0; sub < kLanes; sub += 32) block_rows<2, 4>(x, in, blk, sub, bb, yo, out); break;
+      case 3: for (int64_t sub = 0; sub < kLanes; sub += 16) block_rows<3, 2>(x, in, blk, sub, bb, yo, out); break;
+      default: for (int64_t sub = 0; sub < kLanes; sub += 16) block_rows<4, 2>(x, in, blk, sub, bb, yo, out); break;
+    }
+  }
+  const float* tail = wp + full * in;  // [in][rest]
+  for (int64_t b = 0; b < B; ++b)
+    for (int64_t o = 0; o < rest; ++o) {
+      float a = bias ? bias[full + o] : 0.0f;
+      for (int64_t i = 0; i < in; ++i) a += x[b * in + i] * tail[i * rest + o];
+      y[b * out + full + o] = a;
+    }
 }
 
 // LayerNorm over the last dimension d of B rows (biased variance, as torch::nn::LayerNorm).
