@@ -36,7 +36,9 @@ struct MotionOptions {
   bool camera_height_stated = false;  // false: a source that knows its own (KITTI) may replace it
   double hfov_deg = 70;        // horizontal field of view when the focal length is unknown (dashcams: 60-120)
   int max_width = 1280;        // frames wider than this are halved before tracking
-  double smooth_s = 0.5;       // centred median window over the per-pair estimates
+  // Centred median window over the per-pair estimates: a tenth of a second's yaw is noisy where the scene has little
+  // texture (fog, night), and a car's yaw rate changes over seconds.
+  double smooth_s = 1.0;
   double baseline_s = 0.1;     // frames this far apart are paired: a longer baseline, a steadier triangulation
   int max_features = 800;      // corners tracked per pair
 };
