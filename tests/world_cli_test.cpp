@@ -9,6 +9,8 @@
 
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
+#include "gaia/data/frame_set.h"
+#include "gaia/data/video_io.h"
 #include "gaia/probe/trainer.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
@@ -647,4 +649,52 @@ TEST(SimCli, StdioSessionsGiveTheTokensOfGenerateAndAnswerEveryLine) {
   auto no = test::run_gaia("sim --world " + q(p.trained) + p.tiny());
   EXPECT_NE(no.status, 0);
   EXPECT_NE(no.output.find("--stdio"), std::string::npos) << no.output;
+}
+
+// gaia sim --video: a video file tokenized at start is a prompt by its name, and a session from it stepped with
+// `generate --video`'s command gives generate's tokens; a name it does not have is a 400 naming the ones it has, and
+// --video without --tokenizer is refused.
+TEST(SimCli, AVideoFileIsAPromptByItsName) {
+  auto& p = Pipeline::get();
+  const fs::path video = p.dir / "drive.mp4";
+  {
+    data::Dataset ds(p.ds);
+    auto set = data::frame_set(ds, {ds.ids().front()}, 0, 0);
+    std::vector<cv::Mat> frames;
+    for (auto& f : set.frames) frames.push_back(set.episodes[f.episode]->frame_bgr(f.frame));
+    data::write_video(video, frames, 25);
+  }
+  const std::string tok = " --tokenizer " + q(p.tok / "tokenizer.safetensors");
+  auto r = test::run_gaia("generate --video " + q(video) + " --world " + q(p.trained) + tok + p.tiny() +
+                          " --prompt-frames 2 --frames 3 --steer left --speed 8 --seed 5 --out " + q(p.dir / "gen-video"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  SafetensorsFile rollout(p.dir / "gen-video" / "rollout.safetensors");
+  const auto t = tensor_from_view(rollout.get("tokens")).to(torch::kLong).reshape({5, -1});
+  const fs::path requests = p.dir / "sim-video.jsonl";
+  write_file_atomic(requests,
+                    "{\"op\": \"create\", \"prompt\": {\"episode\": \"drive\", \"frames\": 2}, \"seed\": 5}\n"
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n"
+                    "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n"
+                    "{\"op\": \"create\", \"prompt\": {\"episode\": \"elsewhere\"}}\n");
+  r = test::run_shell(test::gaia_command("sim --video " + q(video) + " --world " + q(p.trained) + tok + p.tiny() +
+                                         " --stdio") + " < " + q(requests) + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::vector<nlohmann::json> answers;
+  std::istringstream lines(r.output);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.empty() && line[0] == '{') answers.push_back(nlohmann::json::parse(line));
+  ASSERT_EQ(answers.size(), 4u) << r.output;
+  EXPECT_NE(r.output.find("video prompt 'drive'"), std::string::npos) << r.output;
+  EXPECT_EQ(answers[0]["status"], 200) << answers[0].dump();
+  EXPECT_EQ(answers[0]["prompt_frames"], 2);
+  for (int64_t k = 2; k < 4; ++k) {
+    ASSERT_EQ(answers[size_t(k - 1)]["status"], 200) << answers[size_t(k - 1)].dump();
+    auto got = answers[size_t(k - 1)]["tokens"].get<std::vector<int64_t>>();
+    EXPECT_EQ(got, std::vector<int64_t>(t[k].data_ptr<int64_t>(), t[k].data_ptr<int64_t>() + t.size(1))) << "step " << k;
+  }
+  EXPECT_EQ(answers[3]["status"], 400);
+  EXPECT_NE(answers[3]["error"].get<std::string>().find("video prompts are drive"), std::string::npos) << answers[3];
+  r = test::run_gaia("sim --video " + q(video) + " --world " + q(p.trained) + p.tiny() + " --stdio < /dev/null");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--video needs --tokenizer"), std::string::npos) << r.output;
 }

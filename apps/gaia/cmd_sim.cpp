@@ -20,6 +20,8 @@
 #ifndef GAIA_NO_VIDEO
 #include <opencv2/imgcodecs.hpp>
 
+#include "gaia/data/video_io.h"
+
 #include "gaia/emerging/common.h"
 #include "gaia/probe/trainer.h"
 #include "gaia/report/report.h"
@@ -32,6 +34,8 @@ namespace {
 
 struct SimFlags {
   std::string tokens, world, tokenizer, probe, t5;
+  std::vector<std::string> videos;
+  int video_frames = 64;
   bool stdio = false;
   int max_sessions = 8, max_queue = 4;
   double idle_s = 600;
@@ -44,6 +48,12 @@ constexpr size_t kMaxLine = 1 << 20;  // bytes of one request
 void add_sim_flags(CLI::App* cmd, SimFlags* g, SharedFlags* flags) {
   cmd->add_option("TOKENS", g->tokens, "token dataset or file whose episodes are video prompts ({\"episode\": ID})");
   add_token_format_flags(cmd, &g->format);
+  cmd->add_option("--video", g->videos,
+                  "video files tokenized at start (needs --tokenizer), each a prompt named by its file name without "
+                  "the extension ({\"episode\": \"highway\"}); repeatable")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--video-frames", g->video_frames, "frames of each --video kept, at the world model's rate")
+      ->check(number_in({1, 4096}));
   add_weights_flag(cmd, Weights::World, &g->world);
   add_weights_flag(cmd, Weights::Tokenizer, &g->tokenizer, "decodes frames to PNG for steps that ask ({\"frame\": true})");
   add_weights_flag(cmd, Weights::Probe, &g->probe,
@@ -77,33 +87,51 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
   }
   const int64_t T = model->layout.T;
   std::mutex ds_lock;  // the dataset's episode cache is not shared between threads
-  // {"episode": ID or index, "start": step, "frames": P}: P frames of TOKENS and their actions.
+  // --video prompts by name: tokens [frames, n], no actions (filled below, once the tokenizer is loaded).
+  std::vector<std::pair<std::string, torch::Tensor>> videos;
+  // {"episode": ID or index, "start": step, "frames": P}: P frames of a --video or of TOKENS, with their actions.
   sim::PromptSource prompts;
-  if (ds)
+  if (ds || !g.videos.empty())
     prompts = [&, T](const nlohmann::json& q) {
       for (const auto& [k, v] : q.items())
         if (k != "episode" && k != "start" && k != "frames") fail("unknown field 'prompt.{}'", k);
       if (!q.contains("episode") || !(q["episode"].is_string() || q["episode"].is_number_unsigned()))
-        fail("'prompt.episode' must be an episode id or index of the server's TOKENS");
-      std::lock_guard<std::mutex> g_(ds_lock);
-      const size_t e = ds->find(q["episode"].is_string() ? q["episode"].get<std::string>()
-                                                          : std::to_string(q["episode"].get<uint64_t>()));
+        fail("'prompt.episode' must be the name of a --video or an episode id or index of the server's TOKENS");
+      const std::string id = q["episode"].is_string() ? q["episode"].get<std::string>()
+                                                      : std::to_string(q["episode"].get<uint64_t>());
       auto whole = [&](const char* k, int64_t fallback, int64_t lo, int64_t hi) {
         if (!q.contains(k)) return fallback;
         if (!q[k].is_number_integer() || q[k].get<int64_t>() < lo || q[k].get<int64_t>() > hi)
           fail("'prompt.{}' must be a whole number in [{}, {}]", k, lo, hi);
         return q[k].get<int64_t>();
       };
-      const int64_t steps = ds->steps(e), start = whole("start", 0, 0, steps - 1);
-      const int64_t P = std::min(whole("frames", std::min<int64_t>(T - 1, 4), 0, T - 1), steps - start);
+      auto frames_from = [&](int64_t steps, int64_t* start) {
+        *start = whole("start", 0, 0, steps - 1);
+        return std::min(whole("frames", std::min<int64_t>(T - 1, 4), 0, T - 1), steps - *start);
+      };
+      for (const auto& [name, tokens] : videos)
+        if (name == id) {
+          int64_t start = 0;
+          const int64_t P = frames_from(tokens.size(0), &start);
+          return sim::Prompt{tokens.narrow(0, start, P).clone(), {}};
+        }
+      if (!ds) {
+        std::string names;
+        for (const auto& v : videos) names += (names.empty() ? "" : ", ") + v.first;
+        fail("no prompt '{}': this server's video prompts are {}", id, names);
+      }
+      std::lock_guard<std::mutex> g_(ds_lock);
+      const size_t e = ds->find(id);
+      int64_t start = 0;
+      const int64_t P = frames_from(ds->steps(e), &start);
       auto ep = episode_prompt(*ds, e, start, P);
       return sim::Prompt{ep.tokens, ep.actions};
     };
   sim::FrameEncoder frames;
   sim::ReadBack read_back;
 #ifdef GAIA_NO_VIDEO
-  if (!g.tokenizer.empty() || !g.probe.empty())
-    fail("--tokenizer and --probe need a build with video support (this one has none)");
+  if (!g.tokenizer.empty() || !g.probe.empty() || !g.videos.empty())
+    fail("--tokenizer, --probe and --video need a build with video support (this one has none)");
 #else
   emerging::Models m;  // the read-back's models: the tokenizer's decoder and the dynamics probe
   if (!g.probe.empty() && g.tokenizer.empty()) fail("--probe reads decoded frames: it needs --tokenizer");
@@ -134,9 +162,24 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
     }
     return img;
   };
+  if (!g.videos.empty() && g.tokenizer.empty()) fail("--video needs --tokenizer to turn the frames into tokens");
   if (!g.tokenizer.empty()) {
-    tok = tokenizer::load_tokenizer(g.tokenizer, dev);
+    Config tok_cfg;
+    tok = tokenizer::load_tokenizer(g.tokenizer, dev, &tok_cfg);
     emerging::check_tokenizer_fits(info, g.world, tok, g.tokenizer);
+    for (const auto& path : g.videos) {  // as gaia generate --video reads its prompt
+      const std::string name = fs::path(path).stem().string();
+      for (const auto& v : videos)
+        if (v.first == name) fail("--video {}: a second prompt named '{}' (prompts are named by file name)", path, name);
+      auto f = data::read_frames_at_rate(path, tok_cfg.data.world_fps, g.video_frames, tok_cfg.data.height,
+                                         tok_cfg.data.width);
+      auto tokens = tokenizer::encode_frames(tok, f, dev).reshape({int64_t(f.size()), -1}).to(torch::kCPU);
+      if (tokens.size(1) != model->layout.n)
+        fail("--video {}: the tokenizer gives {} tokens per frame, the world model takes {}", path, tokens.size(1),
+             model->layout.n);
+      std::fprintf(stderr, "gaia sim: video prompt '%s': %ld frames\n", name.c_str(), long(tokens.size(0)));
+      videos.emplace_back(name, tokens);
+    }
     frames = [&, decoded](const torch::Tensor& t, const std::string& format) -> nlohmann::json {
       auto img = decoded(t);
       std::vector<uchar> bytes;
