@@ -172,6 +172,12 @@ TEST(Plan, TrainingMemoryFollowsTheRunsSettings) {
   EXPECT_DOUBLE_EQ(m2.optimizer, 4 * N);
   EXPECT_DOUBLE_EQ(m2.buckets, 4 * N);
   EXPECT_NEAR(m2.activations, m.activations / 2, 1);
+  EXPECT_DOUBLE_EQ(m2.grads, 4 * N);
+  // ZeRO-2 (implies ZeRO-1): the kept gradients and their buckets divided over the ranks too.
+  const auto m4 = sizing::world_train_memory(c, sizing::train_memory_settings(c, 4, 1, false, false, true));
+  EXPECT_DOUBLE_EQ(m4.optimizer, 2 * N);
+  EXPECT_DOUBLE_EQ(m4.grads, N);
+  EXPECT_DOUBLE_EQ(m4.buckets, N);
   auto fused = base;
   fused.fused_attention = true;
   const double s = double(c.sequence_length());

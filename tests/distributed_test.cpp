@@ -110,10 +110,12 @@ TEST(Distributed, GradientsAveragedDuringTheBackwardPassEqualThoseAveragedAfterI
   struct Result {
     double max_error = 1;
     size_t buckets = 0, sent_during = 0;
-    bool never_has_grad = true, only1_has_grad = false;
+    bool never_has_grad = true, only1_has_grad = false, others_freed = false;
     std::string error;
   };
-  auto run = [&](bool overlap) {
+  // sharded: ZeRO-2, p[0] and p[1] rank 0's, the rest rank 1's.
+  auto run = [&](bool overlap, bool sharded = false) {
+    const std::vector<int> owner = sharded ? std::vector<int>{0, 0, 1, 1, 1} : std::vector<int>{};
     const int port = train::RankEnv::free_local_port();
     std::vector<Result> results(2);
     auto rank = [&](int r) {
@@ -125,7 +127,7 @@ TEST(Distributed, GradientsAveragedDuringTheBackwardPassEqualThoseAveragedAfterI
         env.master_port = port;
         train::Distributed dist(env, torch::kCPU, std::chrono::seconds(60));
         auto p = make_params();
-        train::GradientReducer reducer(p, dist, overlap, 0.001, 0.0005);
+        train::GradientReducer reducer(p, dist, overlap, 0.001, 0.0005, owner);
         for (int step = 0; step < 2; ++step) {  // twice: the hooks re-arm
           for (auto& t : p) t.mutable_grad() = torch::Tensor();
           for (int k = 0; k < 2; ++k) reducer.backward(loss_of(p, r, k), k == 1);
@@ -135,8 +137,14 @@ TEST(Distributed, GradientsAveragedDuringTheBackwardPassEqualThoseAveragedAfterI
         for (int rr = 0; rr < 2; ++rr)
           for (int k = 0; k < 2; ++k) loss_of(ref, rr, k).backward();
         out.max_error = 0;
-        for (size_t i = 0; i < 4; ++i)
+        out.others_freed = true;
+        for (size_t i = 0; i < 4; ++i) {
+          if (sharded && owner[i] != r) {
+            out.others_freed = out.others_freed && !p[i].grad().defined();
+            continue;
+          }
           out.max_error = std::max(out.max_error, (p[i].grad() - ref[i].grad() / 2).abs().max().item<double>());
+        }
         out.buckets = reducer.buckets();
         out.sent_during = reducer.sent_during_backward();
         out.never_has_grad = p[4].grad().defined();
@@ -164,15 +172,29 @@ TEST(Distributed, GradientsAveragedDuringTheBackwardPassEqualThoseAveragedAfterI
     EXPECT_LT(r.max_error, 1e-6);
     EXPECT_EQ(r.sent_during, 0u);
   }
+  // ZeRO-2: each rank ends with the mean of its own parameters' gradients and none of the others'.
+  for (bool overlap : {true, false}) {
+    const auto sharded = run(overlap, true);
+    for (int r = 0; r < 2; ++r) {
+      const auto& x = sharded[size_t(r)];
+      ASSERT_TRUE(x.error.empty()) << x.error;
+      EXPECT_LT(x.max_error, 1e-6) << "rank " << r;
+      EXPECT_TRUE(x.others_freed) << "rank " << r;
+      EXPECT_GE(x.buckets, 3u);
+      EXPECT_FALSE(x.never_has_grad);
+      EXPECT_EQ(x.only1_has_grad, r == 1);  // rank 1's own, and rank 1 used it
+    }
+  }
 }
 
 TEST(DistributedCli, TwoRanksTrainTheWeightsOfOneProcess) {
   test::TempDir dir;
   const auto tokens = token_file(dir.path);
-  // The tiny world batch of 4: one process, two ranks of 2, two ranks with sharded AdamW state, one process
-  // accumulating two micro-batches of 2.
+  // The tiny world batch of 4: one process, two ranks of 2, two ranks with sharded AdamW state (ZeRO-1), and with
+  // sharded gradients too (ZeRO-2), one process accumulating two micro-batches of 2.
   const std::vector<std::pair<std::string, std::string>> runs = {
-      {"one", ""}, {"two", " --nproc 2"}, {"zero", " --nproc 2 --shard-optimizer"}, {"accumulate", " --accumulate 2"}};
+      {"one", ""}, {"two", " --nproc 2"}, {"zero", " --nproc 2 --shard-optimizer"},
+      {"zero2", " --nproc 2 --shard-gradients"}, {"accumulate", " --accumulate 2"}};
   for (const auto& [name, flags] : runs) {
     auto r = test::run_gaia(train_args(tokens, dir / name) + " --steps 6" + flags);
     ASSERT_EQ(r.status, 0) << name << ": " << r.output;
@@ -181,7 +203,7 @@ TEST(DistributedCli, TwoRanksTrainTheWeightsOfOneProcess) {
     EXPECT_NE(first, std::string::npos) << name << ": " << r.output;
     EXPECT_EQ(r.output.find("world: step 6 (done)", first + 1), std::string::npos) << name << ": " << r.output;
   }
-  for (const auto& run : {"two", "zero", "accumulate"}) {
+  for (const auto& run : {"two", "zero", "zero2", "accumulate"}) {
     EXPECT_LT(max_difference(dir / "one" / "world.safetensors", dir / run / "world.safetensors"), 2e-5) << run;
     auto a = test::jsonl_numbers(dir / "one" / "metrics.jsonl", "loss");
     auto b = test::jsonl_numbers(dir / run / "metrics.jsonl", "loss");

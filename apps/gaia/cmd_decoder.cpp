@@ -72,7 +72,7 @@ void register_decoder(CLI::App& app) {
       if (launch_local_ranks(*par)) return;
       auto dist = join_job(*par, c);
       decoder::DecoderTrainOptions opt = *o;
-      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer, !par->no_overlap};
+      opt.parallel = parallel_of(*par, dist.get());
       opt.dataset = *dataset;
       opt.tokenizer = *tok;
       opt.out = flags->out;

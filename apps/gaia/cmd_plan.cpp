@@ -23,6 +23,9 @@ void register_plan(CLI::App& app) {
   cmd->add_option("--accumulate", *accumulate, "training memory: micro-batches per rank and step")
       ->check(number_in({1, 1 << 16}));
   cmd->add_flag("--shard-optimizer", *shard, "training memory: AdamW's state sharded over the ranks (ZeRO-1)");
+  auto shard_grads = std::make_shared<bool>(false);
+  cmd->add_flag("--shard-gradients", *shard_grads,
+                "training memory: the kept gradients sharded too (ZeRO-2; implies --shard-optimizer)");
   cmd->add_flag("--json", *json, "print the plan as JSON");
   cmd->add_flag("--keys", *keys, "list every config key with its type, role (architecture, training, sampling, ...), value in this config and allowed range");
   cmd->callback([=] {
@@ -38,7 +41,7 @@ void register_plan(CLI::App& app) {
     }
     sizing::Plan p = sizing::make_plan(c);
     // This build's attention: fused where LibTorch has scaled_dot_product_attention (torch/attention.cpp).
-    const auto ms = sizing::train_memory_settings(c, *ranks, *accumulate, *shard, TORCH_VERSION_MAJOR >= 2);
+    const auto ms = sizing::train_memory_settings(c, *ranks, *accumulate, *shard, TORCH_VERSION_MAJOR >= 2, *shard_grads);
     const auto mem = sizing::world_train_memory(c, ms);
     if (*json) {
       nlohmann::json j = {{"config", c.name},

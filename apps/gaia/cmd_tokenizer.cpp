@@ -90,7 +90,7 @@ void register_tokenizer(CLI::App& app) {
       if (launch_local_ranks(*par)) return;
       auto dist = join_job(*par, c);
       tokenizer::TrainOptions opt = *o;
-      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer, !par->no_overlap};
+      opt.parallel = parallel_of(*par, dist.get());
       opt.dataset = *dataset;
       opt.out = flags->out;
       if (!opt.init.empty())

@@ -101,7 +101,7 @@ void register_world(CLI::App& app) {
       world::WorldTrainOptions opt = *o;
       using Text = world::WorldTrainOptions::Text;
       opt.text = *encoder == "words" ? Text::Words : (!t5->empty() || *encoder == "precomputed") ? Text::Embeddings : Text::Auto;
-      opt.parallel = {dist.get(), par->accumulate, par->shard_optimizer, !par->no_overlap};
+      opt.parallel = parallel_of(*par, dist.get());
       opt.tokens = *tokens;
       opt.format = token_format(*format, c, false);
       opt.out = flags->out;

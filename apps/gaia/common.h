@@ -15,6 +15,7 @@ struct MotionOptions;
 
 namespace gaia::train {
 class Distributed;
+struct Parallel;
 }  // namespace gaia::train
 
 namespace gaia::world {
@@ -103,15 +104,19 @@ void apply_threads(const Config& c);
 // its exit status: train-all's stages and demo --from-scratch.
 int run_gaia_child(const std::vector<std::string>& args);
 
-// Data-parallel training (train/distributed.h): --nproc, --accumulate, --shard-optimizer, --no-overlap, --dist-timeout.
+// Data-parallel training (train/distributed.h): --nproc, --accumulate, --shard-optimizer, --shard-gradients,
+// --no-overlap, --dist-timeout.
 struct ParallelFlags {
   int nproc = 1;
   int accumulate = 1;
   bool shard_optimizer = false;
+  bool shard_gradients = false;
   bool no_overlap = false;
   double timeout_s = 1800;  // as torch.distributed's default
 };
 void add_parallel_flags(CLI::App* cmd, ParallelFlags* f);
+// How a trainer runs in `dist`'s job under these flags.
+train::Parallel parallel_of(const ParallelFlags& f, train::Distributed* dist);
 // With --nproc N > 1 outside a job: runs N ranks of this same command on this machine and returns true once all
 // succeeded (the caller then returns: the ranks did the work); when one fails, stops the others and fails naming it.
 // False when there is nothing to launch (one process, or already a rank of a job).

@@ -39,12 +39,25 @@ void add_parallel_flags(CLI::App* cmd, ParallelFlags* f) {
       ->check(number_in({1, 1 << 16}))->group(g);
   cmd->add_flag("--shard-optimizer", f->shard_optimizer,
                 "keep AdamW's state sharded over the ranks (ZeRO-1): 1/N of it on each")->group(g);
+  cmd->add_flag("--shard-gradients", f->shard_gradients,
+                "also keep each averaged gradient on the one rank that updates it (ZeRO-2; implies "
+                "--shard-optimizer)")->group(g);
   cmd->add_flag("--no-overlap", f->no_overlap,
                 "average the gradients after the backward pass instead of during it (the same numbers, later)")
       ->group(g);
   cmd->add_option("--dist-timeout", f->timeout_s,
                   "seconds a rank waits for the others (joining, every collective) before failing")
       ->check(number_in({1, 86400}))->group(g);
+}
+
+train::Parallel parallel_of(const ParallelFlags& f, train::Distributed* dist) {
+  train::Parallel p;
+  p.dist = dist;
+  p.accumulate = f.accumulate;
+  p.shard_optimizer = f.shard_optimizer || f.shard_gradients;
+  p.shard_gradients = f.shard_gradients;
+  p.overlap = !f.no_overlap;
+  return p;
 }
 
 bool launch_local_ranks(const ParallelFlags& f) {

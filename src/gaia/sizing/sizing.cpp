@@ -215,11 +215,12 @@ std::string format_plan(const Plan& p, const Config& c) {
 }
 
 TrainMemorySettings train_memory_settings(const Config& c, int ranks, int accumulate, bool shard_optimizer,
-                                          bool fused_attention) {
+                                          bool fused_attention, bool shard_gradients) {
   TrainMemorySettings m;
   m.ranks = std::max(1, ranks);
   m.micro_batch = std::max<int64_t>(1, c.world.batch_size / (int64_t(m.ranks) * std::max(1, accumulate)));
-  m.shard_optimizer = shard_optimizer && m.ranks > 1;
+  m.shard_optimizer = (shard_optimizer || shard_gradients) && m.ranks > 1;
+  m.shard_gradients = shard_gradients && m.ranks > 1;
   m.activation_bytes = c.run.precision == "fp32" ? 4 : 2;
   m.fused_attention = fused_attention;
   m.checkpointing = c.world.activation_checkpointing;
@@ -232,9 +233,12 @@ TrainMemory world_train_memory(const Config& c, const TrainMemorySettings& m) {
   const double B = double(m.micro_batch), s = double(c.sequence_length()), d = c.world.d_model;
   const double L = c.world.n_layers, H = c.world.n_heads, K = c.tokenizer.codebook_size;
   t.weights = f * N;  // float32 master weights
-  t.grads = f * N;
+  // ZeRO-2 keeps the gradients of this rank's share and their buckets only (train/grad_reducer.h): at the start of
+  // the backward pass the others' were freed after the last step.
+  const double share = m.shard_gradients ? m.ranks : 1;
+  t.grads = f * N / share;
   t.optimizer = 2 * f * N / (m.shard_optimizer ? m.ranks : 1);  // AdamW's m and v
-  t.buckets = m.ranks > 1 ? f * N : 0;                          // the flat all-reduce buffers (train/grad_reducer.h)
+  t.buckets = m.ranks > 1 ? f * N / share : 0;                  // the flat all-reduce buffers (train/grad_reducer.h)
   // Saved for the backward pass per layer (world/transformer.cpp): the float32 residual stream at both norms, the
   // two norms' outputs, q, k, v, the heads' output, the MLP's hidden layer before and after the GELU:
   // s B d (2 f + 14 e); and the attention probabilities, H s^2 B in float32 (and again in e bytes under autocast),
@@ -263,7 +267,7 @@ std::string format_train_memory(const TrainMemory& t, const TrainMemorySettings&
   std::string s = fmt::format(
       "  training memory  per rank at its peak, micro-batch {} x {} rank(s), {}, {} attention{}{}:\n", m.micro_batch,
       m.ranks, m.activation_bytes == 4 ? "fp32" : "16-bit autocast", m.fused_attention ? "fused" : "unfused",
-      m.shard_optimizer ? ", sharded AdamW" : "", m.checkpointing ? ", activation checkpointing" : "");
+      m.shard_gradients ? ", sharded AdamW and gradients" : m.shard_optimizer ? ", sharded AdamW" : "", m.checkpointing ? ", activation checkpointing" : "");
   s += fmt::format("    weights {} + gradients {} + AdamW {}{} + activations {} + output distribution {} = {}\n",
                    bytes(t.weights), bytes(t.grads), bytes(t.optimizer),
                    t.buckets > 0 ? " + all-reduce buffers " + bytes(t.buckets) : "", bytes(t.activations),

@@ -38,13 +38,14 @@ struct Plan {
 Plan make_plan(const Config& c);
 
 // The memory one rank holds at its peak while training the world model, term by term (bytes), for a run's own
-// settings: `gaia plan --nproc --accumulate --shard-optimizer` prints it, and `world train` reports it beside the
+// settings: `gaia plan --nproc --accumulate --shard-optimizer --shard-gradients` prints it, and `world train` reports it beside the
 // peak it measures. The peak falls at the start of the backward pass, with every saved activation and the output
 // distribution's gradients alive, on top of last step's gradients and AdamW's moments.
 struct TrainMemorySettings {
   int64_t micro_batch = 1;       // sequences per forward pass: world.batch_size / (ranks x accumulate)
   int ranks = 1;
   bool shard_optimizer = false;  // AdamW's moments divided over the ranks (ZeRO-1)
+  bool shard_gradients = false;  // and the kept gradients with their buckets (ZeRO-2)
   int activation_bytes = 4;      // 4: float32; 2: bf16 / fp16 autocast
   bool fused_attention = false;  // scaled_dot_product_attention (LibTorch >= 2): no s^2 probabilities kept
   bool checkpointing = false;    // world.activation_checkpointing
@@ -56,7 +57,7 @@ struct TrainMemory {
 };
 // The settings of a run of `c` with `ranks` and `accumulate`, on this build (fused attention where LibTorch has it).
 TrainMemorySettings train_memory_settings(const Config& c, int ranks, int accumulate, bool shard_optimizer,
-                                          bool fused_attention);
+                                          bool fused_attention, bool shard_gradients = false);
 TrainMemory world_train_memory(const Config& c, const TrainMemorySettings& m);
 std::string format_train_memory(const TrainMemory& t, const TrainMemorySettings& m);  // one table for the CLI
 

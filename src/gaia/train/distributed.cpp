@@ -185,6 +185,30 @@ std::function<void()> Distributed::start_sum(torch::Tensor& flat, const std::str
   };
 }
 
+std::function<void()> Distributed::start_sum_to(torch::Tensor& flat, int root, const std::string& what) {
+  if (!impl_) return [] {};
+  std::vector<torch::Tensor> v{flat};
+  c10d::ReduceOptions o;
+  o.rootRank = root;
+  c10::intrusive_ptr<c10d::Work> work;
+  try {
+#ifdef GAIA_WITH_NCCL
+    if (impl_->nccl) work = impl_->nccl->reduce(v, o);
+    else
+#endif
+      work = impl_->gloo->reduce(v, o);
+  } catch (const std::exception& e) {
+    lost_contact(env_.rank, what, e.what());
+  }
+  return [work, what, rank = env_.rank] {
+    try {
+      work->wait();
+    } catch (const std::exception& e) {
+      lost_contact(rank, what, e.what());
+    }
+  };
+}
+
 torch::Device Distributed::comm_device() const { return impl_ ? impl_->comm_device : torch::Device(torch::kCPU); }
 
 void Distributed::broadcast(const std::vector<torch::Tensor>& tensors, int root) {

@@ -31,6 +31,7 @@ struct Parallel {
   Distributed* dist = nullptr;  // this rank's job; nullptr = one process
   int accumulate = 1;           // micro-batches per rank and step
   bool shard_optimizer = false; // ZeRO-1 (train/parallel_adamw.h)
+  bool shard_gradients = false; // ZeRO-2: also each averaged gradient on its owner only (implies shard_optimizer)
   bool overlap = true;          // gradients sent during the last backward pass (train/grad_reducer.h)
   // Examples per micro-batch for a batch of `batch` (named `key` in an error when it does not divide evenly).
   int64_t micro_batch(int64_t batch, const std::string& key) const;
@@ -60,6 +61,8 @@ class Distributed {
   // Starts summing the float tensor `flat` (on comm_device()) over the ranks, in place; the function returned waits
   // for it (a rank lost meanwhile fails with one line naming `what`). Gradients: train/grad_reducer.h.
   std::function<void()> start_sum(torch::Tensor& flat, const std::string& what);
+  // The same sum delivered to rank `root` only (c10d's reduce): the other ranks' `flat` is left undefined in value.
+  std::function<void()> start_sum_to(torch::Tensor& flat, int root, const std::string& what);
   torch::Device comm_device() const;  // where the tensors of a collective live
   // Rank `root`'s values of `tensors` copied into every rank's (one message).
   void broadcast(const std::vector<torch::Tensor>& tensors, int root);

@@ -35,7 +35,9 @@ std::unordered_set<const void*> reached_leaves(const torch::Tensor& loss) {
 struct GradientReducer::State {
   struct Bucket {
     std::vector<size_t> params;  // indices into `params`, in the order they fill `flat`
-    torch::Tensor flat;          // float32 on the job's communication device
+    torch::Tensor flat;          // float32 on the job's communication device (another owner's: only while it is sent)
+    int64_t elems = 0;
+    int owner = -1;              // the rank its sum goes to; -1: every rank
     size_t ready = 0;            // parameters whose gradient is in `flat`
   };
   std::vector<torch::Tensor> params;
@@ -48,9 +50,12 @@ struct GradientReducer::State {
   bool armed = false;
   Distributed* dist = nullptr;
 
+  bool mine(const Bucket& b) const { return b.owner < 0 || b.owner == dist->rank(); }
   void fill(size_t i, const torch::Tensor& g) {
     const auto& p = params[i];
     auto& b = buckets[bucket_of[i]];
+    if (!b.flat.defined())
+      b.flat = torch::empty({b.elems}, torch::TensorOptions().dtype(torch::kFloat).device(dist->comm_device()));
     b.flat.narrow(0, int64_t(offset[i]), p.numel()).copy_(g.reshape({-1}));
     filled[i] = 1;
     ++b.ready;
@@ -58,7 +63,9 @@ struct GradientReducer::State {
   // Starts every full bucket from `next` on, in order: the same order on every rank.
   void start_ready() {
     while (next < buckets.size() && buckets[next].ready == buckets[next].params.size()) {
-      pending.push_back(dist->start_sum(buckets[next].flat, "averaging gradients"));
+      auto& b = buckets[next];
+      pending.push_back(b.owner < 0 ? dist->start_sum(b.flat, "averaging gradients")
+                                    : dist->start_sum_to(b.flat, b.owner, "averaging gradients"));
       ++next;
     }
   }
@@ -78,8 +85,10 @@ struct GradientReducer::State {
 };
 
 GradientReducer::GradientReducer(const std::vector<torch::Tensor>& params, Distributed& dist, bool overlap,
-                                 double bucket_mb, double first_bucket_mb)
+                                 double bucket_mb, double first_bucket_mb, const std::vector<int>& owner)
     : state_(std::make_shared<State>()) {
+  if (!owner.empty() && owner.size() != params.size())
+    fail("gradient sharding: {} owners for {} parameters", owner.size(), params.size());
   auto& s = *state_;
   s.dist = &dist;
   s.params = params;
@@ -91,11 +100,15 @@ GradientReducer::GradientReducer(const std::vector<torch::Tensor>& params, Distr
   // Reverse order: the backward pass makes the last layers' gradients first.
   int64_t limit = std::max<int64_t>(1, int64_t(first_bucket_mb * 1024 * 1024 / 4)), size = 0;
   s.buckets.emplace_back();
+  auto owner_of = [&](size_t k) { return owner.empty() ? -1 : owner[k]; };
+  if (n > 0) s.buckets.back().owner = owner_of(n - 1);
   for (size_t k = n; k-- > 0;) {
-    if (size > 0 && size + params[k].numel() > limit) {
+    const bool full = size > 0 && size + params[k].numel() > limit;
+    if (full || (size > 0 && owner_of(k) != s.buckets.back().owner)) {  // a bucket holds one owner's parameters
       s.buckets.emplace_back();
+      s.buckets.back().owner = owner_of(k);
       size = 0;
-      limit = std::max<int64_t>(1, int64_t(bucket_mb * 1024 * 1024 / 4));
+      if (full) limit = std::max<int64_t>(1, int64_t(bucket_mb * 1024 * 1024 / 4));
     }
     s.bucket_of[k] = s.buckets.size() - 1;
     s.offset[k] = size_t(size);
@@ -103,9 +116,8 @@ GradientReducer::GradientReducer(const std::vector<torch::Tensor>& params, Distr
     size += params[k].numel();
   }
   for (auto& b : s.buckets) {
-    int64_t elems = 0;
-    for (size_t k : b.params) elems += params[k].numel();
-    b.flat = torch::zeros({elems}, torch::TensorOptions().dtype(torch::kFloat).device(dist.comm_device()));
+    for (size_t k : b.params) b.elems += params[k].numel();
+    if (s.mine(b)) b.flat = torch::zeros({b.elems}, torch::TensorOptions().dtype(torch::kFloat).device(dist.comm_device()));
   }
   if (!overlap) return;
   for (size_t i = 0; i < n; ++i) {
@@ -175,13 +187,19 @@ void GradientReducer::finish() {
   const auto u = used_cpu.accessor<float, 1>();
   const double inv = 1.0 / double(s.dist->size());
   for (size_t i = 0; i < n; ++i) {
-    if (u[int64_t(i)] == 0) continue;
     auto p = s.params[i];
+    if (!s.mine(s.buckets[s.bucket_of[i]])) {  // another rank's to update: its gradient is not kept here
+      p.mutable_grad() = torch::Tensor();
+      continue;
+    }
+    if (u[int64_t(i)] == 0) continue;
     auto g = s.buckets[s.bucket_of[i]].flat.narrow(0, int64_t(s.offset[i]), p.numel()).view(p.sizes());
     g = g.mul(inv).to(p.device(), p.scalar_type());
     if (p.grad().defined()) p.mutable_grad().copy_(g);
     else p.mutable_grad() = g;
   }
+  for (auto& b : s.buckets)
+    if (!s.mine(b)) b.flat = torch::Tensor();
   s.reset();
 }
 

@@ -17,9 +17,11 @@ namespace gaia::train {
 class GradientReducer {
  public:
   // `params`: in the same order on every rank; `dist` outlives this object. `overlap` false: everything is sent
-  // after the backward passes (the same sums, later).
+  // after the backward passes (the same sums, later). `owner` (one rank per parameter; empty: none): ZeRO-2, each
+  // bucket holds one owner's parameters and is summed to that rank alone (c10d reduce), and after finish() a rank
+  // keeps the gradients of its own parameters only, the others' freed with their buckets.
   GradientReducer(const std::vector<torch::Tensor>& params, Distributed& dist, bool overlap = true,
-                  double bucket_mb = 25, double first_bucket_mb = 1);
+                  double bucket_mb = 25, double first_bucket_mb = 1, const std::vector<int>& owner = {});
   ~GradientReducer();
   GradientReducer(const GradientReducer&) = delete;
   GradientReducer& operator=(const GradientReducer&) = delete;
@@ -29,7 +31,7 @@ class GradientReducer {
   void backward(const torch::Tensor& loss, bool last);
   // Every parameter's gradient replaced by its mean over the ranks: sends what backward() has not sent yet, waits
   // for all of it. A parameter without a gradient on any rank keeps none (as in one process); one with a gradient on
-  // some rank counts as zero where it has none.
+  // some rank counts as zero where it has none. With owners, only the owner's parameters keep a gradient.
   void finish();
 
   size_t buckets() const;

@@ -55,9 +55,13 @@ ParallelAdamW::ParallelAdamW(const std::vector<torch::Tensor>& params, const Ada
   for (const auto& p : params)
     if (p.requires_grad()) params_.push_back(p);
   full_ = make_adamw(params_, s.lr, s.weight_decay, s.beta1, s.beta2);
-  if (dist.size() > 1) reducer_ = std::make_unique<GradientReducer>(params_, dist, par.overlap);
-  if (!par.shard_optimizer) return;
-  owner_ = partition(params_, dist.size());
+  const bool shard = par.shard_optimizer || par.shard_gradients;
+  if (shard) owner_ = partition(params_, dist.size());
+  shard_gradients_ = par.shard_gradients && dist.size() > 1;
+  if (dist.size() > 1)
+    reducer_ = std::make_unique<GradientReducer>(params_, dist, par.overlap, 25, 1,
+                                                 shard_gradients_ ? owner_ : std::vector<int>{});
+  if (!shard) return;
   std::vector<torch::Tensor> mine;
   for (size_t i = 0; i < params_.size(); ++i)
     if (owner_[i] == dist.rank()) mine.push_back(params_[i]);
@@ -85,8 +89,26 @@ double ParallelAdamW::step(double max_norm, double loss_scale) {
   }
   // fp16 measures the norm even unclipped: an overflow must be seen.
   double norm = 0;
-  if (max_norm > 0) norm = clip_grad_norm(params_, max_norm);
-  else if (max_norm == 0 || loss_scale != 1) norm = global_norm(params_);
+  if (shard_gradients_) {
+    // Each rank holds its own parameters' gradients: the norm of all of them is summed over the ranks, and each
+    // rank clips its own as torch::nn::utils::clip_grad_norm_ would clip them all.
+    if (max_norm >= 0 || loss_scale != 1) {
+      double sq = 0;
+      for (const auto& p : params_)
+        if (p.grad().defined()) sq += p.grad().to(torch::kDouble).pow(2).sum().item<double>();
+      norm = std::sqrt(dist_.sum(sq));
+    }
+    if (max_norm > 0 && std::isfinite(norm)) {
+      torch::NoGradGuard no_grad;
+      const double coef = std::min(1.0, max_norm / (norm + 1e-6));
+      for (auto& p : params_)
+        if (p.grad().defined()) p.mutable_grad().mul_(coef);
+    }
+  } else if (max_norm > 0) {
+    norm = clip_grad_norm(params_, max_norm);
+  } else if (max_norm == 0 || loss_scale != 1) {
+    norm = global_norm(params_);
+  }
   if (!std::isfinite(norm)) return norm;
   if (!own_) {
     full_->step();

@@ -3,7 +3,9 @@
 // while it runs, then clipped by their global norm; then either every rank updates every parameter (replicated state), or, sharded in
 // the ZeRO-1 manner (Rajbhandari et al. 2020, as DeepSpeed ZeRO in the paper's §4), each rank keeps AdamW's two
 // moments for its own share of the parameters only, updates that share and sends it to the others. Sharding
-// divides the optimiser state (8 bytes per parameter in float32) by the world size.
+// divides the optimiser state (8 bytes per parameter in float32) by the world size. ZeRO-2 (`shard_gradients`) also
+// sums each gradient to its owner alone (reduce instead of all-reduce, bucket by bucket during the backward pass)
+// and keeps only those: the averaged gradients held between the backward pass and the update are divided too.
 //
 // A checkpoint holds the state as one AdamW over every parameter, whatever the world size, so a run resumes on
 // another number of ranks.
@@ -52,6 +54,7 @@ class ParallelAdamW {
   std::unique_ptr<torch::optim::AdamW> own_;   // this rank's share, when sharded
   Distributed& dist_;
   std::unique_ptr<GradientReducer> reducer_;   // in a job of more than one
+  bool shard_gradients_ = false;               // ZeRO-2: each rank holds its own parameters' averaged gradients
 };
 
 }  // namespace gaia::train

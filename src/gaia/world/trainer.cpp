@@ -367,7 +367,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   result.best_bits = best_bits;
   if (measure_memory && peak_resident > 0 && resident_at_start > 0) {
     const auto settings = sizing::train_memory_settings(cfg, dist.size(), accumulate, opt.parallel.shard_optimizer,
-                                                        TORCH_VERSION_MAJOR >= 2);
+                                                        TORCH_VERSION_MAJOR >= 2, opt.parallel.shard_gradients);
     const auto plan = sizing::world_train_memory(cfg, settings);
     result.peak_memory_beyond_start = peak_resident - resident_at_start;
     result.planned_memory_beyond_weights = plan.beyond_weights();
