@@ -163,40 +163,24 @@ void Distributed::barrier() {
   all_reduce(t, "a barrier");  // an all-reduce, so that a dead rank fails it within the timeout like any other
 }
 
-std::function<void()> Distributed::start_sum(torch::Tensor& flat, const std::string& what) {
-  if (!impl_) return [] {};
-  std::vector<torch::Tensor> v{flat};
-  c10::intrusive_ptr<c10d::Work> work;
-  try {
-#ifdef GAIA_WITH_NCCL
-    if (impl_->nccl) work = impl_->nccl->allreduce(v);
-    else
-#endif
-      work = impl_->gloo->allreduce(v);
-  } catch (const std::exception& e) {
-    lost_contact(env_.rank, what, e.what());
-  }
-  return [work, what, rank = env_.rank] {
-    try {
-      work->wait();
-    } catch (const std::exception& e) {
-      lost_contact(rank, what, e.what());
-    }
-  };
-}
+std::function<void()> Distributed::start_sum(torch::Tensor& flat, const std::string& what) { return start(flat, -1, what); }
 
 std::function<void()> Distributed::start_sum_to(torch::Tensor& flat, int root, const std::string& what) {
+  return start(flat, root, what);
+}
+
+std::function<void()> Distributed::start(torch::Tensor& flat, int root, const std::string& what) {
   if (!impl_) return [] {};
   std::vector<torch::Tensor> v{flat};
   c10d::ReduceOptions o;
-  o.rootRank = root;
+  o.rootRank = std::max(0, root);
   c10::intrusive_ptr<c10d::Work> work;
   try {
 #ifdef GAIA_WITH_NCCL
-    if (impl_->nccl) work = impl_->nccl->reduce(v, o);
+    if (impl_->nccl) work = root < 0 ? impl_->nccl->allreduce(v) : impl_->nccl->reduce(v, o);
     else
 #endif
-      work = impl_->gloo->reduce(v, o);
+      work = root < 0 ? impl_->gloo->allreduce(v) : impl_->gloo->reduce(v, o);
   } catch (const std::exception& e) {
     lost_contact(env_.rank, what, e.what());
   }

@@ -75,6 +75,7 @@ class Distributed {
   std::shared_ptr<Impl> impl_;
   RankEnv env_;
   void all_reduce(torch::Tensor& flat, const std::string& what);
+  std::function<void()> start(torch::Tensor& flat, int root, const std::string& what);  // root -1: every rank
 };
 
 }  // namespace gaia::train
