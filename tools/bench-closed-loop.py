@@ -9,6 +9,8 @@ accuracy), and whether the minute collapses: copy rate and unigram entropy per 1
 
 With the flag --recorded among the lane keeper's, each drive follows its prompt episode's own recorded commands
 (after the 4 prompt frames) instead of the bends, so that its minute is compared with the same drive's record.
+With --reference DIR (a token dataset), the real windows are DIR's instead of TOKENS': drives of the kind the plan
+drives (e.g. `gaia synth --scene bend` for the bends).
 """
 import array, ast, json, math, os, socket, subprocess, sys, tempfile
 
@@ -20,6 +22,13 @@ episodes = [int(e) for e in (sys.argv[4] if len(sys.argv) > 4 else "0,1,2,3").sp
 keeper_flags = sys.argv[5:]
 recorded = "--recorded" in keeper_flags
 keeper_flags = [f for f in keeper_flags if f != "--recorded"]
+reference_dir = tokens_dir
+if "--reference" in keeper_flags:
+    i = keeper_flags.index("--reference")
+    if i + 1 >= len(keeper_flags):
+        sys.exit("bench-closed-loop: --reference needs a token dataset")
+    reference_dir = keeper_flags[i + 1]
+    del keeper_flags[i:i + 2]
 RATE, WINDOW = 6.25, 62  # Hz; a 10 s window in frames, as gaia eval's long rollouts
 
 
@@ -62,8 +71,9 @@ def mean(xs):
 
 eps = sorted(os.listdir(os.path.join(tokens_dir, "episodes")))
 real = []
-for e in eps:
-    shape, flat = read_npy(os.path.join(tokens_dir, "episodes", e, "tokens.npy"))
+reference_eps = sorted(os.listdir(os.path.join(reference_dir, "episodes")))
+for e in reference_eps:
+    shape, flat = read_npy(os.path.join(reference_dir, "episodes", e, "tokens.npy"))
     n = len(flat) // shape[0]
     real += windows_stats([flat[i * n:(i + 1) * n] for i in range(shape[0])])
 real_copy, real_ent = mean([c for c, _ in real]), mean([h for _, h in real])
@@ -109,7 +119,8 @@ sys.path.insert(0, os.path.join(root, "examples"))
 from lane_keeper import spearman  # noqa: E402
 
 turning = [(p, g) for p, g in zip(pooled["planned"], pooled["got"]) if abs(p) >= 0.002]
-print(f"real windows ({len(real)} of {len(eps)} episodes): copy rate {real_copy:.3f}, entropy {real_ent:.2f} bits")
+print(f"real windows ({len(real)} of {len(reference_eps)} episodes of {reference_dir}): copy rate {real_copy:.3f}, "
+      f"entropy {real_ent:.2f} bits")
 print("| prompt episode | curvature Spearman | sign accuracy | read-back speed | copy rate vs real | entropy vs real | frames/s |")
 print("|---:|---:|---:|---:|---:|---:|---:|")
 for e, sp, sign, v, c, h, fps in rows:
