@@ -76,6 +76,9 @@ def main():
     ap.add_argument("--gain", type=float, default=0.5, help="how strongly the read-back corrects the command")
     ap.add_argument("--guidance", type=float, default=16,
                     help="action guidance scale against the mirrored command (gaia eval and gaia generate steer with 16)")
+    ap.add_argument("--negative", choices=["mirror", "turn", "null"], default="mirror",
+                    help="what guidance contrasts a command with: its mirror image at the prompt's speed, at its own "
+                         "speed (the turn alone), or no command")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", help="write every step as JSON here")
     a = ap.parse_args()
@@ -87,7 +90,7 @@ def main():
             recorded = json.load(f)
         if not isinstance(recorded, list) or not all(isinstance(r, list) and len(r) == 2 for r in recorded):
             sys.exit(f"lane_keeper: {a.plan}: expected a JSON list of [speed, curvature] pairs")
-    create = {"seed": a.seed, "guidance": a.guidance}
+    create = {"seed": a.seed, "guidance": a.guidance, "action_negative": a.negative}
     if a.episode is not None:
         create["prompt"] = {"episode": int(a.episode) if a.episode.isdigit() else a.episode, "frames": a.prompt_frames}
     session = post(server, "create", create)["session"]

@@ -60,7 +60,11 @@ TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
     acts[k][1] = c / world::kCurvatureScale;
   }
   p.actions = acts;
-  p.negative_actions = world::counter_actions(acts, P, torch::tensor(7.5));
+  torch::Tensor mirrored;  // the "mirror" rollout: "turn" must give other frames, or the test tells nothing
+  for (const bool turn_only : {false, true}) {
+  SCOPED_TRACE(turn_only ? "turn: the counter-command at the command's own speed" : "mirror");
+  // "turn" mirrors the curvature at each command's own speed; "mirror" at the prompt's last speed.
+  p.negative_actions = turn_only ? world::counter_actions(acts, P) : world::counter_actions(acts, P, torch::tensor(7.5));
   world::RolloutOptions o;
   o.frames = int(F);
   o.seed = 9;
@@ -69,9 +73,12 @@ TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
   o.sampling.guide_actions_within_top_k = f.info.config.world.guide_actions_within_top_k;
   o.guidance.scale = 3;
   auto expected = world::rollout(f.model, p, o).tokens[0];  // [P + F, n]
+  if (turn_only) EXPECT_FALSE(torch::equal(expected, mirrored));
+  else mirrored = expected;
 
   sim::SessionSettings s;
   s.seed = 9;
+  s.negative_keeps_speed = turn_only;
   sim::SimSession session(f.model, f.info, s);
   session.start(prompt, prompt_actions);
   EXPECT_EQ(session.steps(), P);
@@ -81,6 +88,7 @@ TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
     EXPECT_TRUE(torch::equal(tok, expected[P + k])) << "step " << k;
   }
   EXPECT_TRUE(torch::equal(session.tokens(), expected));
+  }
 }
 
 TEST(SimSession, AForkContinuesAsItsParentAndApartFromIt) {

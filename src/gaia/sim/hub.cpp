@@ -191,8 +191,10 @@ HubReply SessionHub::create(const json& r) {
   s.temperature = f.number("temperature", 1e-3, 100, -1);
   s.window_stride = int(f.integer("window_stride", 1, 1 << 20, 1));
   const auto negative = f.text("action_negative", "mirror");
-  if (negative != "mirror" && negative != "null") fail("'action_negative' must be \"mirror\" or \"null\"");
-  s.mirror_negative = negative == "mirror";
+  if (negative != "mirror" && negative != "turn" && negative != "null")
+    fail("'action_negative' must be \"mirror\", \"turn\" or \"null\"");
+  s.mirror_negative = negative != "null";
+  s.negative_keeps_speed = negative == "turn";
   Prompt p;
   if (f.has("prompt")) {
     const auto& q = r.at("prompt");

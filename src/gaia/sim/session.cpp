@@ -18,7 +18,7 @@ torch::Tensor append(const torch::Tensor& rows, const torch::Tensor& row) {
 
 SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, const SessionSettings& s,
                        std::shared_ptr<text::TextEncoder> text)
-    : model_(&model), info_(&info), mirror_(s.mirror_negative), encoder_(std::move(text)) {
+    : model_(&model), info_(&info), mirror_(s.mirror_negative), mirror_keeps_speed_(s.negative_keeps_speed), encoder_(std::move(text)) {
   if (!encoder_ && !info.embeds_text()) encoder_ = std::make_shared<text::WordEncoder>(info.vocab);
   const auto& w = info.config.world;
   o_.seed = s.seed;
@@ -99,7 +99,8 @@ void SimSession::append_row(const Action& a) {
   if (mirror_) {
     // A command's counter-command: the other way at the prompt's speed; no command contrasts with nothing.
     const bool commanded = !std::isnan(a.speed) || !std::isnan(a.curvature);
-    auto neg = commanded ? torch::tensor({float(kept_speed_ / world::kSpeedScale), -row[1].item<float>()})
+    const float v = mirror_keeps_speed_ ? row[0].item<float>() : float(kept_speed_ / world::kSpeedScale);
+    auto neg = commanded ? torch::tensor({v, -row[1].item<float>()})
                          : torch::tensor({float(kNaN), float(kNaN)});
     cond_.negative_actions = append(cond_.negative_actions, neg);
   }

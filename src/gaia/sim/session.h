@@ -29,6 +29,7 @@ struct SessionSettings {
   double temperature = -1;      // -1: the weights' world.temperature
   int window_stride = 1;        // §2.3: slide the window by one step
   bool mirror_negative = true;  // guidance contrasts a command with its mirror image at the prompt's speed
+  bool negative_keeps_speed = false;  // ... at the command's own speed instead: guidance on the turn alone
 };
 
 struct Action {
@@ -79,7 +80,7 @@ class SimSession {
   world::WorldModel* model_;
   const world::WorldInfo* info_;
   world::RolloutOptions o_;
-  bool mirror_;
+  bool mirror_, mirror_keeps_speed_;
   std::shared_ptr<text::TextEncoder> encoder_;
   // Per-step conditioning, one row per step so far (+1 while stepping), as rollout() reads it.
   world::RolloutPrompt cond_;
