@@ -12,6 +12,12 @@ namespace {
 using nlohmann::json;
 
 HubReply error(int status, const std::string& message) { return {status, json{{"error", message}}}; }
+// A 429 for `more` sessions beyond the `open` ones, where at most `max` fit.
+HubReply too_many(size_t open, size_t more, int max) {
+  return error(429, more == 1 ? fmt::format("{} sessions are open, the most this server takes: close one first", open)
+                              : fmt::format("{} sessions are open and {} more asked for; this server takes at most {}: "
+                                            "close some first", open, more, max));
+}
 HubReply no_session(int64_t id) { return error(404, fmt::format("no session {} (closed, expired or never created)", id)); }
 
 // {"tokens": [[n ids] x P], "actions": [[speed m/s, curvature 1/m] x P]} (actions optional; null = unknown).
@@ -152,11 +158,7 @@ HubReply SessionHub::add_all(std::vector<std::unique_ptr<SimSession>> s, std::ve
   std::lock_guard<std::mutex> g(lock_);
   expire();
   if (int(sessions_.size() + s.size()) > limits_.max_sessions)
-    return error(429, s.size() == 1 ? fmt::format("{} sessions are open, the most this server takes: close one first",
-                                                  sessions_.size())
-                                    : fmt::format("{} sessions are open and {} more asked for; this server takes at "
-                                                  "most {}: close some first", sessions_.size(), s.size(),
-                                                  limits_.max_sessions));
+    return too_many(sessions_.size(), s.size(), limits_.max_sessions);
   for (auto& session : s) {
     auto e = std::make_shared<Entry>();
     e->session = std::move(session);
@@ -249,9 +251,7 @@ HubReply SessionHub::branch(const json& r) {
   if (open) {  // fail early, before the work; add_all checks again
     std::lock_guard<std::mutex> g(lock_);
     if (int(sessions_.size() + plans.size()) > limits_.max_sessions)
-      return error(429, fmt::format("{} sessions are open and {} more asked for; this server takes at most {}: close "
-                                    "some first, or fork with \"open\": false", sessions_.size(), plans.size(),
-                                    limits_.max_sessions));
+      return too_many(sessions_.size(), plans.size(), limits_.max_sessions);
   }
   std::vector<SimSession> branches;
   json body{{"branches", json::array()}};

@@ -102,9 +102,7 @@ ScalingResult run_scaling(const Config& c, const ScalingOptions& o,
                           const std::function<void(size_t, const ScalingRun&)>& on_run,
                           const std::function<void(int, int)>& on_step,
                           const std::function<void(const std::string&)>& on_note) {
-  TokenFormat format = o.format;
-  if (format.codebook_size == 0 && !fs::exists(o.tokens / "dataset.json")) format.codebook_size = c.tokenizer.codebook_size;
-  const TokenDataset ds(o.tokens, format);
+  const TokenDataset ds(o.tokens, o.format.for_training(o.tokens, c.tokenizer.codebook_size));
   ScalingResult res;
   res.runs = scaling_family(c, o.sizes, ds.tokens_per_step());
   fs::create_directories(o.out / "runs");

@@ -174,4 +174,10 @@ TokenArray read_token_file(const fs::path& file, const TokenFormat& f) {
   return t;
 }
 
+TokenFormat TokenFormat::for_training(const fs::path& tokens, int64_t config_K) const {
+  TokenFormat f = *this;
+  if (f.codebook_size == 0 && !fs::exists(tokens / "dataset.json")) f.codebook_size = config_K;
+  return f;
+}
+
 }  // namespace gaia::world

@@ -29,6 +29,10 @@ struct TokenFormat {
   // nearest frame. Fails naming `file` when the file's rate is below the world model's (unless keep_rate).
   std::vector<int64_t> kept_frames(int64_t frames, const fs::path& file) const;
   double dataset_rate_hz() const;  // the rate of the steps kept
+  // The format for training on `tokens` with a config whose codebook holds `config_K` codes: gaia tokenize's datasets
+  // state K in dataset.json; other tokenizers' files take it from this format or the config, never from their
+  // largest id.
+  TokenFormat for_training(const fs::path& tokens, int64_t config_K) const;
 };
 
 struct TokenArray {

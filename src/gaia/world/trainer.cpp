@@ -65,12 +65,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   // One run per --out; a checkpoint a kill broke is put back (by rank 0, before any rank reads it).
   const auto run_dir = train::claim_run_dir(opt.out, dist, note);
 
-  // gaia tokenize's datasets state K in dataset.json; other tokenizers' files take it from the format or the
-  // config, never from their largest id.
-  TokenFormat format = opt.format;
-  if (format.codebook_size == 0 && !fs::exists(opt.tokens / "dataset.json"))
-    format.codebook_size = cfg.tokenizer.codebook_size;
-  TokenDataset ds(opt.tokens, format);
+  TokenDataset ds(opt.tokens, opt.format.for_training(opt.tokens, cfg.tokenizer.codebook_size));
   const int64_t T = wc.context_steps;
   auto split = ds.split(0.1, cfg.run.seed);
   auto train_eps = ds.indices(split.train);
