@@ -185,20 +185,28 @@ TEST(ProbeCli, ReadsFramesThroughTheTokenizer) {
   auto tok = probe::load_through(tok_file, set.episodes[0]->frame_bgr(0), d / "ds", torch::kCPU);
   const probe::Span one;
   auto x = probe::inputs(set.episodes, set.frames, one, {&tok, torch::kCPU}, {true, false, true, false});
+  // The same frame through the tokenizer in batches of other sizes: the convolutions may take other kernels by batch
+  // size and CPU, so a decoded frame agrees to far below what the tokenizer itself changes (a tenth of it), not bit
+  // for bit. Raw frames are copied, so those are equal.
+  std::vector<double> changed(4);
+  auto near = [&](const torch::Tensor& a, const torch::Tensor& b, size_t i) {
+    return (a - b).abs().mean().item<double>() < changed[i] / 10;
+  };
   for (size_t i = 0; i < 4; ++i) {
     const auto& e = set.frames[i];
     const cv::Mat raw = set.episodes[e.episode]->frame_bgr(e.frame);
     const cv::Mat back = tokenizer::decode_tokens(tok, tokenizer::encode_frames(tok, {raw}, torch::kCPU), torch::kCPU)[0];
-    const auto want = probe::probe_input({i % 2 == 0 ? back : raw});
-    EXPECT_TRUE(torch::equal(x[int64_t(i)], want)) << i;
     // The tokenizer changes the frame: the flag is what decides, not a no-op.
-    EXPECT_GT((probe::probe_input({back}) - probe::probe_input({raw})).abs().mean().item<double>(), 1e-3) << i;
+    changed[i] = (probe::probe_input({back}) - probe::probe_input({raw})).abs().mean().item<double>();
+    EXPECT_GT(changed[i], 1e-3) << i;
+    if (i % 2 == 0) EXPECT_TRUE(near(x[int64_t(i)], probe::probe_input({back}), i)) << i;
+    else EXPECT_TRUE(torch::equal(x[int64_t(i)], probe::probe_input({raw}))) << i;
   }
   // Every example through it when no flags are given (validation and `probe eval`).
   auto all = probe::inputs(set.episodes, set.frames, one, {&tok, torch::kCPU});
-  EXPECT_TRUE(torch::equal(all[0], x[0]));
-  EXPECT_TRUE(torch::equal(all[2], x[2]));
-  EXPECT_FALSE(torch::equal(all[1], x[1]));
+  EXPECT_TRUE(near(all[0], x[0], 0));
+  EXPECT_TRUE(near(all[2], x[2], 2));
+  EXPECT_FALSE(near(all[1], x[1], 1));
 
   const std::string base = "probe train scene " + q(d / "ds") + tiny + " --tokenizer " + q(tok_file) +
                            " --decoded-share 0.5 --steps 8 --batch-size 8 --val-every 4";

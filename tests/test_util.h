@@ -40,6 +40,16 @@ struct TempDir {
   fs::path operator/(const std::string& s) const { return path / s; }
 };
 
+// Two float computations of one quantity that sum in another order or on other kernels (another batch size, a
+// cache against one causal square, AVX2 against AVX-512) agree to within the unit roundoff u of their dtype times
+// the length n of the longest reduction behind each value (the n*u of the standard error bound of a sum), times the
+// size of the values (`scale`) and the number of such reductions stacked one on another (`depth`: layers).
+// Bit-equality is asserted only where the same kernels see the same shapes.
+inline constexpr double kFloat32Roundoff = 0x1p-24, kBf16Roundoff = 0x1p-8;
+inline double sum_tolerance(double roundoff, long long n, double scale, int depth = 1) {
+  return roundoff * double(n) * scale * double(depth);
+}
+
 // The device the model tests run on: GAIA_TEST_DEVICE (cpu, cuda, cuda:N; scripts/gpu-check.sh sets cuda), else
 // the CPU.
 inline std::string device_name() {

@@ -163,7 +163,11 @@ TEST(WorldModel, PrefillFillsTheCacheAsTheBodyDoes) {
     EXPECT_LT((pre.v[l] - body.v[l]).abs().max().item<double>(), 1e-5) << "values, layer " << l;
   }
   auto full = m->body(x);  // no cache: one causal square
-  EXPECT_LT((torch::cat({h0, h1}, 1) - full).abs().max().item<double>(), 1e-4);
+  // Blocks against one square sum attention in another order (and on other kernels by CPU): within n*u of the
+  // 512 positions, layer on layer.
+  const double tol = test::sum_tolerance(test::kFloat32Roundoff, 512, full.abs().max().item<double>(),
+                                         c.world.n_layers);
+  EXPECT_LT((torch::cat({h0, h1}, 1) - full).abs().max().item<double>(), tol);
   EXPECT_GT(full.std().item<double>(), 0.1);
 }
 

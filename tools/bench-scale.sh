@@ -19,15 +19,21 @@ fi
 median_tps() {
   python3 -c "import json,statistics,sys; r=[json.loads(l)['tokens_per_s'] for l in open(sys.argv[1])][2:]; print(round(statistics.median(r)))" "$1"
 }
-train() {  # NAME FLAGS...
+train() {  # NAME FLAGS... (CAP: a command prefix, e.g. env VAR=VALUE)
   local name=$1; shift
   rm -rf "run-$name"
-  "$GAIA" world train tokens --steps "$STEPS" --val-every 0 --out "run-$name" "$@" > "run-$name.log" 2>&1
+  ${CAP:-} "$GAIA" world train tokens --steps "$STEPS" --val-every 0 --out "run-$name" "$@" > "run-$name.log" 2>&1
   echo "$name $(median_tps "run-$name/metrics.jsonl")"
 }
+echo "instruction set: $(grep -o -m1 -w 'avx512_bf16\|avx512f\|avx2' /proc/cpuinfo | head -1)"
 echo "world train, tokens/s (median of steps 3..$STEPS)"
 train fp32 --precision fp32
 train bf16 --precision bf16
+# The same two with LibTorch's kernels capped at AVX2, as a CPU without AVX-512 runs them: there bf16 has no
+# instructions of its own and falls back to fp32 (saying so in the run's log).
+CAP="env ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2" train fp32-avx2 --precision fp32
+CAP="env ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2" train bf16-avx2 --precision bf16
+grep -h "no bf16 instructions" run-bf16-avx2.log || true
 train nproc1 --threads 2
 train nproc2 --nproc 2
 train nproc2-no-overlap --nproc 2 --no-overlap

@@ -228,7 +228,10 @@ void register_generate(CLI::App& app) {
     sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, preview),
                        fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");
-    Autocast autocast(precision_for(run.run.precision, dev), dev);  // run.precision: bf16 / fp16 sampling
+    const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
+      std::fprintf(stderr, "generate: %s\n", n.c_str());
+    });
+    Autocast autocast(precision, dev);  // run.precision: bf16 / fp16 sampling
     auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });
     bar.finish();
     fs::create_directories(flags->out);

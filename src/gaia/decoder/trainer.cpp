@@ -216,7 +216,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
     return v;
   };
 
-  const Precision precision = precision_for(cfg.run.precision, dev);
+  const Precision precision = precision_for(cfg.run.precision, dev, note);
   LossScaler scaler(precision);
   model->train();
   while (step < total) {

@@ -218,7 +218,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
     return v;
   };
 
-  const Precision precision = precision_for(cfg.run.precision, dev);
+  const Precision precision = precision_for(cfg.run.precision, dev, note);
   LossScaler scaler(precision);
   model->train();
   disc->train();

@@ -1,6 +1,11 @@
 #include "gaia/torch/precision.h"
 
+#include <cstdlib>
+
 #include <ATen/autocast_mode.h>
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <cpuid.h>
+#endif
 
 #include "gaia/core/error.h"
 
@@ -22,10 +27,55 @@ std::string to_string(Precision p) {
   return "?";
 }
 
-Precision precision_for(const std::string& s, const torch::Device& device) {
+namespace {
+
+// The instructions themselves, from CPUID: leaf 7 sub-leaf 1 EAX bit 5 (AVX512_BF16), leaf 7 EDX bit 22 (AMX-BF16).
+bool cpuid_bf16() {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  unsigned a, b, c, d;
+  if (__get_cpuid_max(0, nullptr) < 7) return false;
+  __cpuid_count(7, 0, a, b, c, d);
+  const bool amx = d & (1u << 22);
+  __cpuid_count(7, 1, a, b, c, d);
+  return amx || (a & (1u << 5));
+#else
+  return false;  // other CPUs (ARM's BF16 extension among them) are not detected: fp32 is the safe choice
+#endif
+}
+
+// A cap set in the environment that keeps LibTorch's kernels below bf16's instructions.
+bool capped_below_bf16() {
+  if (const char* aten = std::getenv("ATEN_CPU_CAPABILITY")) {
+    const std::string v = aten;
+    if (v == "default" || v == "avx2" || v == "avx") return true;
+  }
+  for (const char* name : {"ONEDNN_MAX_CPU_ISA", "DNNL_MAX_CPU_ISA"}) {
+    const char* isa = std::getenv(name);
+    if (!isa) continue;
+    const std::string v = isa;
+    if (v.find("BF16") == std::string::npos && v.find("AMX") == std::string::npos && v != "ALL") return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+bool cpu_has_bf16() {
+  static const bool has = cpuid_bf16() && !capped_below_bf16();
+  return has;
+}
+
+Precision precision_for(const std::string& s, const torch::Device& device,
+                        const std::function<void(const std::string&)>& note) {
   const Precision p = parse_precision(s);
   if (p == Precision::kFp16 && !device.is_cuda())
     fail("--precision fp16 needs a CUDA device (LibTorch's CPU autocast does bf16 only): use bf16 on the CPU");
+  if (p == Precision::kBf16 && device.is_cpu() && !cpu_has_bf16()) {
+    if (note)
+      note("--precision bf16: this CPU has no bf16 instructions (AVX512_BF16 or AMX), where LibTorch emulates bf16 "
+           "many times slower than fp32 (docs/benchmarks.md): running in fp32 instead");
+    return Precision::kFp32;
+  }
   return p;
 }
 

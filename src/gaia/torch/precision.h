@@ -2,6 +2,7 @@
 // Mixed precision (run.precision, --precision): fp32 everywhere, or matrix products and convolutions in bf16 / fp16
 // through LibTorch's autocast, with float32 master weights and AdamW state, and float32 where the numbers need it
 // (softmax statistics, norms, losses, the VQ distance). fp16 also needs a loss scale against underflowing gradients.
+#include <functional>
 #include <string>
 
 #include <torch/torch.h>
@@ -12,8 +13,15 @@ enum class Precision { kFp32, kBf16, kFp16 };
 
 Precision parse_precision(const std::string& s);  // "fp32" | "bf16" | "fp16"; anything else fails naming it
 std::string to_string(Precision p);
+// Whether this CPU does bf16 arithmetic in hardware (AVX512_BF16 or AMX-BF16) and LibTorch may use it: not capped
+// below that by ATEN_CPU_CAPABILITY or ONEDNN_MAX_CPU_ISA / DNNL_MAX_CPU_ISA. Without it LibTorch emulates bf16
+// products in scalar code, many times slower than float32.
+bool cpu_has_bf16();
+
 // The precision `s` on `device`: fails with one line where that device's autocast cannot do it (fp16 on the CPU).
-Precision precision_for(const std::string& s, const torch::Device& device);
+// bf16 on a CPU without bf16 instructions (cpu_has_bf16) falls back to fp32, and `note` gets one line saying so.
+Precision precision_for(const std::string& s, const torch::Device& device,
+                        const std::function<void(const std::string&)>& note = {});
 
 // Autocast on `device` at `p` for the life of the object (fp32: autocast off, e.g. inside a block that must stay
 // float32 within a bf16 region); the previous state comes back after.

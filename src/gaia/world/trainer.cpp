@@ -257,7 +257,8 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     return v;
   };
 
-  const Precision precision = precision_for(cfg.run.precision, dev);
+  const Precision precision = precision_for(cfg.run.precision, dev, note);
+  cfg.run.precision = to_string(precision);  // what runs: the memory plan below counts it
   LossScaler scaler(precision);
   const int64_t tokens_per_batch = int64_t(wc.batch_size) * model->layout.length();
   model->train();
