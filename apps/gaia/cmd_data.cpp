@@ -12,7 +12,9 @@
 #include "gaia/data/balance.h"
 #include "gaia/data/clip_sampler.h"
 #include "gaia/data/geofence.h"
+#include "gaia/data/holdout.h"
 #include "gaia/data/motion.h"
+#include "gaia/data/recorded_motion.h"
 #include "gaia/core/progress.h"
 #include "gaia/eval/svg_plot.h"
 #include "gaia/world/token_dataset.h"
@@ -142,7 +144,16 @@ void register_data(CLI::App& app) {
     cmd->add_option("--geofence", *boxes, "strict validation box lat_min,lon_min,lat_max,lon_max (repeatable)");
     cmd->add_option("--hold-out", *named, "hold out this episode (or token file stem) and its mirror images and "
                     "replays (repeatable): e.g. one clip for a leave-one-out measurement");
-    cmd->add_option("--val-fraction", *frac, "fraction of the other episodes held out at random");
+    cmd->add_option("--val-fraction", *frac, "fraction of the other episodes held out at random (with --hold-out-by: "
+                    "the share of frames to hold out, by group; default 0.15)");
+    auto by = std::make_shared<std::vector<std::string>>();
+    auto cover = std::make_shared<std::vector<std::string>>(std::vector<std::string>{"weather", "time_of_day", "road"});
+    cmd->add_option("--hold-out-by", *by, "hold out whole groups of episodes with the same metadata, e.g. "
+                    "source_repo,place (clips of one source and place share a drive): every value of --cover that "
+                    "two or more groups hold gets a held-out group, then groups up to --val-fraction of the frames")
+        ->delimiter(',');
+    cmd->add_option("--cover", *cover, "with --hold-out-by: metadata keys whose values each need a held-out group "
+                    "(default weather,time_of_day,road)")->delimiter(',');
     add_token_format_flags(cmd, format.get());
     add_shared_flags(cmd, flags.get(), "split JSON file (default: DATASET/split.json)");
     cmd->callback([=] {
@@ -159,7 +170,22 @@ void register_data(CLI::App& app) {
         if (ds.bare()) fail("{}: a single token file is split in time (its last tenth); split a directory of them", *root);
         for (size_t e = 0; e < ds.size(); ++e) metas.push_back(ds.meta(e));
       }
-      auto s = data::geofence_split(metas, gb, *frac, c.run.seed, *named, *root);
+      std::vector<std::string> held = *named;
+      double random_frac = *frac;
+      if (!by->empty()) {
+        const auto g = data::hold_out_groups(metas, *by, *cover, cmd->count("--val-fraction") ? *frac : 0.15, c.run.seed);
+        held.insert(held.end(), g.episodes.begin(), g.episodes.end());
+        random_frac = 0;
+        std::string groups;
+        for (auto& n : g.groups) groups += (groups.empty() ? "" : "; ") + n;
+        std::printf("held out by %s: %zu groups, %lld of %lld frames (%.1f%%): %s\n", fmt::format("{}", fmt::join(*by, ",")).c_str(),
+                    g.groups.size(), (long long)g.frames, (long long)g.total_frames,
+                    100.0 * double(g.frames) / double(std::max<int64_t>(1, g.total_frames)), groups.c_str());
+        if (!g.uncovered.empty())
+          std::printf("in training only (held by one group, or their groups must stay): %s\n",
+                      fmt::format("{}", fmt::join(g.uncovered, ", ")).c_str());
+      }
+      auto s = data::geofence_split(metas, gb, random_frac, c.run.seed, held, *root);
       if (s.train.empty()) fail("{}: this split leaves no episode to train on", *root);
       fs::path out = flags->out.empty() ? fs::path(*root) / "split.json" : fs::path(flags->out);
       write_file_atomic(out, s.to_json().dump(2) + "\n");
@@ -208,7 +234,7 @@ void register_data(CLI::App& app) {
           continue;
         }
         ProgressBar bar(ep.size(), m.id);
-        const auto est = data::estimate_episode_motion(ep, {}, *mo, [&](int64_t d, int64_t) { bar.update(d); });
+        const auto est = data::estimate_recorded_motion(ep, *mo, [&](int64_t d, int64_t) { bar.update(d); });
         bar.finish();
         ms += est.ms_per_frame;
         ++done;

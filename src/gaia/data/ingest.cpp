@@ -7,6 +7,7 @@
 #include "gaia/core/error.h"
 #include "gaia/data/gps.h"
 #include "gaia/data/kitti.h"
+#include "gaia/data/repeats.h"
 #include "gaia/data/signals.h"
 #include "gaia/data/video_io.h"
 
@@ -91,11 +92,33 @@ void check_frame_size(const fs::path& dataset, int height, int width) {
          "dataset was made with, or another --out", dataset.string(), m.height, m.width, height, width);
 }
 
-// The shared body of every ingest: frames from `src` (at `times` when given, else the source's clock), signals
-// interpolated to each frame, written and committed as one episode.
+// Which of the first `max_frames` frames (0 = all) of `video` repeat the one before, and the camera's rate from
+// the times of the others: a pass over the video alone.
+std::vector<bool> repeats_of(const fs::path& video, const IngestOptions& opt, double* camera_fps) {
+  VideoSource src(video, opt.retime_fps > 0 ? opt.retime_fps : opt.fps, opt.retime_fps > 0);
+  std::vector<double> change, times;
+  cv::Mat prev;
+  VideoFrame vf;
+  while ((opt.max_frames <= 0 || int64_t(change.size()) < opt.max_frames) && src.next(&vf)) {
+    cv::Mat t = change_thumbnail(vf.bgr);
+    change.push_back(prev.empty() ? 0.0 : frame_change(prev, t));
+    times.push_back(vf.time_s);
+    prev = t;
+  }
+  std::vector<bool> repeats = find_repeats(change);
+  std::vector<double> kept;
+  for (size_t i = 0; i < times.size(); ++i)
+    if (!repeats[i]) kept.push_back(times[i]);
+  const double rate = kept_frame_rate(kept);
+  if (kept.size() < times.size() && rate > 0) *camera_fps = std::min(rate, *camera_fps);
+  return repeats;
+}
+
+// The shared body of every ingest: frames from `src` (at `times` when given, else the source's clock) less the
+// `repeats` flagged, signals interpolated to each frame, written and committed as one episode.
 IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSource& sig, EpisodeMeta meta,
                          const fs::path& dataset, const IngestOptions& opt, const std::vector<double>* times,
-                         const std::function<void(int64_t, int64_t)>& progress) {
+                         const std::vector<bool>* repeats, const std::function<void(int64_t, int64_t)>& progress) {
   check_frame_size(dataset, opt.height, opt.width);
   meta.height = opt.height;
   meta.width = opt.width;
@@ -110,27 +133,38 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
   VideoFrame vf;
   double first_t = 0, last_t = 0;
   int64_t total = opt.max_frames > 0 ? std::min(opt.max_frames, src.frame_count_hint()) : src.frame_count_hint();
-  while ((opt.max_frames <= 0 || writer.frames_written() < opt.max_frames) && src.next(&vf)) {
+  int64_t& decoded = res.frames_decoded;
+  while ((opt.max_frames <= 0 || decoded < opt.max_frames) && src.next(&vf)) {
+    const int64_t index = decoded++;
+    if (repeats && size_t(index) < repeats->size() && (*repeats)[size_t(index)]) {
+      ++res.repeats_dropped;
+      continue;
+    }
     FrameRecord r;
     r.bgr = resize_center_crop(vf.bgr, opt.height, opt.width);
-    r.time_s = times ? times->at(size_t(writer.frames_written())) : vf.time_s;
+    r.time_s = times ? times->at(size_t(index)) : vf.time_s;
     if (sig.present()) {
       r.speed = static_cast<float>(sig.sig.speed_at(r.time_s));
       r.curvature = static_cast<float>(sig.sig.curvature_at(r.time_s));
       r.caption = sig.sig.caption_at(r.time_s);
       if (!std::isnan(r.speed)) ++res.frames_with_speed;
     }
+    if (r.caption.empty() && opt.caption) r.caption = opt.caption(r.time_s);
     if (writer.frames_written() == 0) first_t = r.time_s;
     last_t = r.time_s;
     if (motion) motion->add(vf.bgr, r.time_s);  // the recorded frame, before the resize
     writer.append(r);
-    if (progress) progress(writer.frames_written(), std::max(total, writer.frames_written()));
+    if (progress) progress(decoded, std::max(total, decoded));
   }
   const int64_t n = writer.frames_written();
   if (n == 0) fail("{}: video has no decodable frames", video.string());
-  std::string cut = truncation(video, n, res.container_frames, opt.max_frames);
-  if (!cut.empty() && !opt.allow_partial) fail("{}; --allow-partial keeps the {}", cut, n);
-  if (!cut.empty()) res.warnings.push_back(fmt::format("{}; kept the {} (--allow-partial)", cut, n));
+  std::string cut = truncation(video, decoded, res.container_frames, opt.max_frames);
+  if (!cut.empty() && !opt.allow_partial) fail("{}; --allow-partial keeps the {}", cut, decoded);
+  if (!cut.empty()) res.warnings.push_back(fmt::format("{}; kept the {} (--allow-partial)", cut, decoded));
+  if (last_t - first_t < opt.min_seconds)
+    fail("{}: its {} frames span {:.2f} s, shorter than the {:.2f} s of one training window", video.string(), n,
+         last_t - first_t, opt.min_seconds);
+
   if (sig.present()) {
     res.signal_coverage = double(res.frames_with_speed) / double(n);
     if (res.frames_with_speed == 0)
@@ -173,14 +207,25 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
 IngestResult ingest_video(const fs::path& video, const fs::path& dataset, const IngestOptions& opt,
                           const std::function<void(int64_t, int64_t)>& progress) {
   check_fps(opt.fps);
-  VideoSource src(video, opt.fps);
+  check_fps(opt.retime_fps);
+  VideoSource src(video, opt.retime_fps > 0 ? opt.retime_fps : opt.fps, opt.retime_fps > 0);
   const SignalSource sig = signals_of(opt, src.fps());
   EpisodeMeta meta;
   meta.id = opt.id.empty() ? video.stem().string() : opt.id;
   if (meta.id.empty()) meta.id = video.filename().string();
   meta.fps = src.fps();
   meta.source = video.filename().string();
-  return ingest_from(src, video, sig, meta, dataset, opt, nullptr, progress);
+  // The recording itself, so that later steps (gaia data motion) can go back to its full-resolution frames.
+  meta.extra["recording"] = fs::absolute(video).lexically_normal().string();
+  if (opt.retime_fps > 0 || opt.fps > 0)
+    meta.extra["recording_fps"] = fmt::format("{}", opt.retime_fps > 0 ? opt.retime_fps : opt.fps);
+  if (opt.retime_fps > 0) meta.extra["recording_retimed"] = "1";
+  std::vector<bool> repeats;
+  if (opt.drop_repeats) repeats = repeats_of(video, opt, &meta.fps);  // meta.fps: the camera's rate
+  IngestResult res =
+      ingest_from(src, video, sig, meta, dataset, opt, nullptr, opt.drop_repeats ? &repeats : nullptr, progress);
+  res.container_fps = src.fps();
+  return res;
 }
 
 IngestResult ingest_kitti(const fs::path& drive, const fs::path& dataset, const IngestOptions& opt,
@@ -210,7 +255,10 @@ IngestResult ingest_kitti(const fs::path& drive, const fs::path& dataset, const 
     meta.latitude = d.latitude;
     meta.longitude = d.longitude;
   }
-  return ingest_from(src, d.images, sig, meta, dataset, o, &d.image_time_s, progress);
+  meta.extra["recording"] = fs::absolute(drive).lexically_normal().string();
+  IngestResult res = ingest_from(src, d.images, sig, meta, dataset, o, &d.image_time_s, nullptr, progress);
+  res.container_fps = d.fps;
+  return res;
 }
 
 }  // namespace gaia::data

@@ -30,6 +30,14 @@ struct IngestOptions {
   int64_t max_frames = 0;           // 0 = all
   bool overwrite = false;
   bool allow_partial = false;       // keep the frames of a truncated/damaged video (a warning) instead of failing
+  // Drop frames that repeat the one before (data/repeats.h) and keep the true timestamps; the episode's fps
+  // becomes the camera's. Video files and image directories; a KITTI drive's frames are the camera's own.
+  bool drop_repeats = true;
+  // A frame rate that replaces the container's, timing frames by index (a manifest's stated rate for a container
+  // whose own is wrong); 0 = none. Unlike `fps`, it may disagree with the rate the video states.
+  double retime_fps = 0;
+  std::function<std::string(double time_s)> caption;  // each frame's caption where the signals give none
+  double min_seconds = 0;           // fail (writing nothing) when the kept frames span less than this
   // --motion video: estimate speed and curvature from the frames at their recorded resolution (data/motion.h).
   // Without other signals they become the episode's (signals_source "estimated"); beside them, ingest reports
   // how far the two agree and keeps the measured ones.
@@ -41,6 +49,9 @@ struct IngestOptions {
 struct IngestResult {
   EpisodeMeta meta;
   int64_t container_frames = 0;     // the frame count the container states (0 = none)
+  int64_t frames_decoded = 0;       // frames the source gave, repeats included
+  int64_t repeats_dropped = 0;      // frames that repeated the one before (drop_repeats)
+  double container_fps = 0;         // the rate the source states (or --fps); meta.fps is the camera's
   int64_t frames_with_speed = 0;    // frames that got a speed from the signals (CSV, GPS, KITTI OXTS)
   double signal_coverage = 0;       // frames_with_speed / frames; 0 without signals
   std::vector<std::string> warnings;  // one line each, for the app to print as "gaia: warning: ..."

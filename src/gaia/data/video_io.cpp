@@ -56,7 +56,8 @@ cv::Mat to_bgr(const cv::Mat& m) {
 }
 }  // namespace
 
-VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path) {
+VideoSource::VideoSource(const fs::path& path, double fps_override, bool retime)
+    : path_(path), retime_(retime && fps_override > 0) {
   if (!fs::exists(path)) fail("{}: no such file or directory", path.string());
   if (fs::is_directory(path)) {
     for (auto& e : fs::directory_iterator(path))
@@ -77,7 +78,7 @@ VideoSource::VideoSource(const fs::path& path, double fps_override) : path_(path
   double fps = cap_->get(cv::CAP_PROP_FPS);
   // Frame times come from the container's timestamps where it has them, so a stated rate that disagrees would be
   // half applied: refuse it rather than guess which one is right.
-  if (fps_override > 0 && fps > 0 && fps <= 1000 && std::abs(fps_override - fps) > 0.01 * fps)
+  if (!retime_ && fps_override > 0 && fps > 0 && fps <= 1000 && std::abs(fps_override - fps) > 0.01 * fps)
     fail("{}: --fps {:.4g} does not match the {:.4g} fps the video states; leave --fps out (it is for image "
          "directories and videos that state no rate)", path.string(), fps_override, fps);
   fps_ = fps_override > 0 ? fps_override : fps;
@@ -111,7 +112,7 @@ bool VideoSource::next(VideoFrame* out) {
   // or not increasing (some containers report 0 for every frame).
   double t = cap_->get(cv::CAP_PROP_POS_MSEC) / 1000.0;
   double fallback = static_cast<double>(index_) / fps_;
-  if (!(t > last_time_) || !std::isfinite(t)) t = fallback;
+  if (retime_ || !(t > last_time_) || !std::isfinite(t)) t = fallback;
   if (index_ == 0 && t > 0 && t < 1.0 / fps_) t = 0;  // a few containers start at a small offset
   out->time_s = t;
   last_time_ = t;

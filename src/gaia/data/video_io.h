@@ -19,8 +19,10 @@ struct VideoFrame {
 
 class VideoSource {
  public:
-  // fps_override > 0 replaces the container's frame rate (required for image directories).
-  explicit VideoSource(const fs::path& path, double fps_override = 0);
+  // fps_override > 0 replaces the container's frame rate (required for image directories); it must agree with a
+  // rate the video states, unless `retime`, which times every frame by its index at fps_override instead of the
+  // container's timestamps (a stated rate known to be right where the container's is wrong).
+  explicit VideoSource(const fs::path& path, double fps_override = 0, bool retime = false);
   ~VideoSource();
   bool next(VideoFrame* out);  // false at the end
   double fps() const { return fps_; }
@@ -37,6 +39,7 @@ class VideoSource {
   size_t next_image_ = 0;
   int64_t index_ = 0;
   double fps_ = 0, last_time_ = -1;
+  bool retime_ = false;
   int64_t count_hint_ = 0;
   int width_ = 0, height_ = 0;
 };

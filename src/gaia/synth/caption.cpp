@@ -56,6 +56,11 @@ std::string conditions(Rng& r, const std::string& w, const std::string& t) {
 
 }  // namespace
 
+std::string conditions_caption(const std::string& weather, const std::string& time_of_day, uint64_t key) {
+  Rng r(key);
+  return conditions(r, weather, time_of_day);
+}
+
 const std::vector<std::string>& weather_words(const std::string& weather) {
   static const std::map<std::string, std::vector<std::string>> m = {{"clear", {"clear", "sunny"}},
                                                                      {"overcast", {"overcast", "cloudy"}},
