@@ -6,6 +6,7 @@
 #include <random>
 
 #include "gaia/core/error.h"
+#include "gaia/core/hash.h"
 #include "gaia/core/json_file.h"
 #include "gaia/data/mirror.h"
 #include "gaia/data/signals.h"
@@ -87,8 +88,7 @@ Split geofence_split(const Dataset& ds, const std::vector<GeoBox>& strict, doubl
 }
 
 bool held_out_at_random(const std::string& id, double frac, uint64_t seed) {
-  uint64_t h = 1469598103934665603ull;  // FNV-1a: stable across platforms, unlike std::hash
-  for (unsigned char c : split_source_id(id)) h = (h ^ c) * 1099511628211ull;  // a derived episode goes with its source
+  uint64_t h = fnv1a(split_source_id(id));  // a derived episode goes with its source
   std::mt19937_64 rng(seed ^ h);
   return std::uniform_real_distribution<double>(0, 1)(rng) < frac;
 }

@@ -5,6 +5,7 @@
 #include <set>
 
 #include "gaia/core/error.h"
+#include "gaia/core/hash.h"
 
 namespace gaia::data {
 
@@ -18,11 +19,7 @@ std::string meta_value(const EpisodeMeta& m, const std::string& key) {
 
 namespace {
 
-uint64_t tie_break(const std::string& s, uint64_t seed) {
-  uint64_t h = 1469598103934665603ull ^ (seed * 0x9E3779B97F4A7C15ull);
-  for (char c : s) h = (h ^ uint64_t(static_cast<unsigned char>(c))) * 1099511628211ull;
-  return h;
-}
+uint64_t tie_break(const std::string& s, uint64_t seed) { return fnv1a(s, kFnvBasis ^ (seed * 0x9E3779B97F4A7C15ull)); }
 
 std::string group_value(const std::string& v) {
   std::string s = v.substr(0, v.find_first_of(",("));

@@ -128,6 +128,7 @@ IngestResult ingest_from(VideoSource& src, const fs::path& video, const SignalSo
   EpisodeWriter writer(dataset, meta, opt.overwrite);
   IngestResult res;
   res.container_frames = std::max<int64_t>(0, src.frame_count_hint());
+  res.container_fps = src.fps();
   std::unique_ptr<MotionEstimator> motion;
   if (opt.motion_video) motion = std::make_unique<MotionEstimator>(opt.camera, opt.motion);
   VideoFrame vf;
@@ -222,10 +223,7 @@ IngestResult ingest_video(const fs::path& video, const fs::path& dataset, const 
   if (opt.retime_fps > 0) meta.extra["recording_retimed"] = "1";
   std::vector<bool> repeats;
   if (opt.drop_repeats) repeats = repeats_of(video, opt, &meta.fps);  // meta.fps: the camera's rate
-  IngestResult res =
-      ingest_from(src, video, sig, meta, dataset, opt, nullptr, opt.drop_repeats ? &repeats : nullptr, progress);
-  res.container_fps = src.fps();
-  return res;
+  return ingest_from(src, video, sig, meta, dataset, opt, nullptr, opt.drop_repeats ? &repeats : nullptr, progress);
 }
 
 IngestResult ingest_kitti(const fs::path& drive, const fs::path& dataset, const IngestOptions& opt,
@@ -256,9 +254,7 @@ IngestResult ingest_kitti(const fs::path& drive, const fs::path& dataset, const 
     meta.longitude = d.longitude;
   }
   meta.extra["recording"] = fs::absolute(drive).lexically_normal().string();
-  IngestResult res = ingest_from(src, d.images, sig, meta, dataset, o, &d.image_time_s, nullptr, progress);
-  res.container_fps = d.fps;
-  return res;
+  return ingest_from(src, d.images, sig, meta, dataset, o, &d.image_time_s, nullptr, progress);
 }
 
 }  // namespace gaia::data

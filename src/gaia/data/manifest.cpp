@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/hash.h"
 #include "gaia/data/ingest.h"
 #include "gaia/data/signals.h"
 #include "gaia/synth/caption.h"
@@ -113,9 +114,8 @@ std::string manifest_caption(const ManifestRow& row, double time_s) {
   static const std::map<std::string, std::string> road = {
       {"city", "in the city"},           {"highway", "on a highway"},   {"rural", "on a country road"},
       {"residential", "on a residential street"}, {"parking", "in a parking garage"}, {"tunnel", "in a tunnel"}};
-  uint64_t key = 1469598103934665603ull;  // FNV-1a of the id, then the second: the same words on every machine
-  for (char c : row.id) key = (key ^ uint64_t(static_cast<unsigned char>(c))) * 1099511628211ull;
-  key ^= uint64_t(std::max(0.0, time_s)) * 0x9E3779B97F4A7C15ull;
+  // The id's hash, then the second: the same words on every machine.
+  const uint64_t key = fnv1a(row.id) ^ (uint64_t(std::max(0.0, time_s)) * 0x9E3779B97F4A7C15ull);
   const std::string w = row.weather(), t = row.time_of_day();
   std::string out = !w.empty() && !t.empty() ? synth::conditions_caption(w, t, key) : w + t;
   auto it = road.find(row.road());
