@@ -6,6 +6,7 @@
 
 #include "gaia/core/fs.h"
 #include "gaia/data/episode.h"
+#include "gaia/data/geofence.h"
 #include "gaia/data/holdout.h"
 #include "gaia/data/ingest.h"
 #include "gaia/data/manifest.h"
@@ -222,6 +223,32 @@ TEST(IngestManifestCli, AFolderOfClipsResumableWithRepeatsDropped) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("typo.csv:2 (clip plain.avi): column 'weather' is 'sunny'"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "ds2" / "episodes"));
+
+  // Procedural drives beside the clips: --hold-out-by groups the recorded clips and holds the procedural drives out
+  // exactly as the default split does (the drives the shipped models were validated on stay held out).
+  r = test::run_gaia("synth --episodes 12 --seconds 1 --size 32x64 --seed 1 --threads 1 --out " + q(d / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("data split " + q(d / "ds") + " --hold-out-by source_repo,place --cover licence --seed 5");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("procedural drives: "), std::string::npos) << r.output;
+  const Split split = read_split(d / "ds" / "split.json");
+  const auto held_ids = split.held_out();
+  Dataset mixed(d / "ds");
+  int procedural_held = 0;
+  std::vector<std::string> recorded_held;
+  for (size_t e = 0; e < mixed.size(); ++e) {
+    const auto& m = mixed.meta(e);
+    const bool out = std::find(held_ids.begin(), held_ids.end(), m.id) != held_ids.end();
+    if (m.is_procedural()) {
+      EXPECT_EQ(out, held_out_at_random(m.id, kDefaultValFraction, 5)) << m.id;
+      procedural_held += out;
+    } else {
+      if (out) recorded_held.push_back(m.id);
+    }
+  }
+  // Nothing to cover: the smallest group up to 15% of the recorded frames (procedural ones, shorter, do not count).
+  EXPECT_EQ(recorded_held, std::vector<std::string>{"held"}) << r.output;
+  EXPECT_LT(procedural_held, 12);
 
   // gaia data motion goes back to the recording; without it, it refuses rather than estimate from 32x64 frames.
   fs::remove(d / "clips" / "plain.avi");

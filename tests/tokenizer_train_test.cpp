@@ -1,5 +1,6 @@
 // Tokenizer training end to end on tiny synthetic data: overfitting, exact resume, tokenize (plain and mirrored),
 // and CLI errors.
+#include <algorithm>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -394,6 +395,20 @@ TEST(TokenizerEvalCli, HeldOutFramesSpreadOverEveryEpisodeAndGroupsAddUp) {
   for (auto& [k, g] : e["by_time_of_day"].items()) by_time += g["frames"].get<int64_t>();
   EXPECT_EQ(by_time, 12);
   EXPECT_EQ(e["by_weather"].size(), weathers.size());
+  // Per clip: the median and the worst of the episodes' own means, by footage (these drives are all procedural).
+  ASSERT_TRUE(e.contains("by_clip")) << e.dump();
+  std::vector<std::pair<double, std::string>> per_episode;
+  for (auto& [id, g] : e["by_episode"].items()) per_episode.push_back({g["psnr"].get<double>(), id});
+  std::sort(per_episode.begin(), per_episode.end());
+  ASSERT_GE(per_episode.size(), 2u);
+  const auto& clips = e["by_clip"]["procedural"];
+  EXPECT_EQ(clips["episodes"].get<size_t>(), per_episode.size());
+  EXPECT_EQ(clips["worst_episode"].get<std::string>(), per_episode.front().second);
+  EXPECT_DOUBLE_EQ(clips["worst_psnr"].get<double>(), per_episode.front().first);
+  const size_t k = per_episode.size();
+  const double median = k % 2 ? per_episode[k / 2].first : 0.5 * (per_episode[k / 2 - 1].first + per_episode[k / 2].first);
+  EXPECT_DOUBLE_EQ(clips["median_psnr"].get<double>(), median);
+  EXPECT_FALSE(e["by_clip"].contains("real"));
 }
 
 TEST(TokenizerTrainCli, BadInputsAreClearErrors) {

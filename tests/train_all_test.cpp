@@ -4,6 +4,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
 #include <torch/torch.h>
 
 #include "gaia/core/safetensors.h"
@@ -155,4 +157,48 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
   r = test::run_gaia("train-all --synth 3" + tiny + " --out " + q(d / "x"));
   EXPECT_NE(r.output.find("go with --data"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "x"));
+
+  // The real-footage release: a folder of clips with its manifest, fine-tuned from the models just shipped, with
+  // procedural drives mixed in, clips held out by source, the realism probe trained and shipped beside them.
+  fs::create_directories(d / "clips");
+  for (const char* name : {"a.avi", "b.avi", "c.avi"}) {
+    cv::VideoWriter vw((d / "clips" / name).string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 20,
+                       cv::Size(128, 72));
+    ASSERT_TRUE(vw.isOpened());
+    cv::RNG rng(name[0]);
+    for (int i = 0; i < 40; ++i) {
+      cv::Mat f(72, 128, CV_8UC3, cv::Scalar(90, 100, 110));
+      for (int k = 0; k < 30; ++k)
+        cv::circle(f, {(rng.uniform(0, 128) + 5 * i) % 128, rng.uniform(0, 72)}, 4, cv::Scalar(rng.uniform(0, 255), 80, 200), cv::FILLED);
+      vw.write(f);
+    }
+  }
+  write_file_atomic(d / "clips" / "clips.csv",
+                    "file,weather,time_of_day,road,source_repo,place\n"
+                    "a.avi,clear,day,city,one/a,Berlin\nb.avi,clear,day,city,two/b,Paris\nc.avi,rain,night,rural,three/c,Rome\n");
+  const std::string release = "train-all --data " + q(d / "clips") + " --manifest clips.csv --from " + q(d / "models") +
+                              " --synth 3 --wander-episodes 0 --swerve-episodes 0 --seconds 3 --world-cf-steps 0" + tiny +
+                              " --tokenizer-steps 3 --world-steps 2 --decoder-steps 2 --realism-probe-steps 2 --skip-eval"
+                              " --ship " + q(d / "release") + " --out " + q(d / "real");
+  r = test::run_gaia(release);
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors", "probe-realism.safetensors"})
+    EXPECT_TRUE(fs::exists(d / "release" / f)) << f;
+  data::Dataset real(d / "real" / "data");
+  EXPECT_EQ(real.size(), 6u);  // three clips, three procedural drives
+  const auto split = data::read_split(d / "real" / "data" / "split.json");
+  EXPECT_EQ(split.held_out().size() > 0, true);
+  auto stages = nlohmann::json::parse(read_file(d / "real" / "train-all.json"));
+  std::string commands;
+  for (auto& s : stages) commands += s["command"].get<std::string>() + "\n";
+  EXPECT_NE(commands.find("--decoder-only"), std::string::npos) << commands;  // the codes the world model knows
+  EXPECT_NE(commands.find("--distill-procedural-only"), std::string::npos) << commands;
+  EXPECT_NE(commands.find("data.balance_tokenizer=[footage]"), std::string::npos) << commands;
+  EXPECT_NE(commands.find("--hold-out-by source_repo,place"), std::string::npos) << commands;
+  // A manifest with a value it may not hold: one line before any stage, nothing made.
+  write_file_atomic(d / "clips" / "bad.csv", "file,weather\na.avi,sunny\n");
+  r = test::run_gaia("train-all --data " + q(d / "clips") + " --manifest bad.csv" + tiny + " --out " + q(d / "y"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("column 'weather' is 'sunny'"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "y"));
 }

@@ -365,6 +365,45 @@ TEST(WorldCli, FineTuneDistilsFromTheTeacher) {
   EXPECT_FALSE(fs::exists(p.dir / "distil-bad" / "world.safetensors"));
 }
 
+// --distill-procedural-only (a fine-tune that adds real drives to a teacher that knows only the procedural world):
+// on procedural windows the term is the same as without the flag, step for step; on drives a camera recorded it is
+// never applied.
+TEST(WorldCli, DistilsOnlyProceduralWindowsWhenAsked) {
+  auto& p = Pipeline::get();
+  // The same tokens as recorded footage: only their episodes' source differs.
+  const fs::path recorded = p.dir / "recorded-tokens";
+  fs::remove_all(recorded);
+  fs::copy(p.tokens, recorded, fs::copy_options::recursive);
+  for (auto& e : fs::directory_iterator(recorded / "episodes")) {
+    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    j["source"] = "dashcam.mp4";
+    write_file_atomic(e.path() / "episode.json", j.dump(2));
+  }
+  const std::string base = p.tiny() + " --init " + q(p.trained) + " --distill-from " + q(p.trained) +
+                           " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2 --set world.p_text=0.6 --steps 4"
+                           " --val-every 100";
+  auto kl = [&](const fs::path& tokens, const std::string& flags, const std::string& out) {
+    auto r = test::run_gaia("world train " + q(tokens) + base + flags + " --out " + q(p.dir / out));
+    EXPECT_EQ(r.status, 0) << r.output;
+    return test::jsonl_numbers(p.dir / out / "metrics.jsonl", "distill");
+  };
+  const auto all = kl(p.tokens, "", "distil-all");
+  const auto procedural = kl(p.tokens, " --distill-procedural-only", "distil-procedural");
+  const auto real = kl(recorded, " --distill-procedural-only", "distil-real");
+  ASSERT_EQ(all.size(), 4u);
+  ASSERT_EQ(procedural.size(), 4u);
+  ASSERT_EQ(real.size(), 4u);
+  EXPECT_GT(all[3], 1e-6);  // the term is there to keep ...
+  for (size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(procedural[i], all[i]) << i;  // ... on procedural windows, exactly ...
+    EXPECT_EQ(real[i], 0.0) << i;           // ... and never on recorded ones
+  }
+  auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --distill-procedural-only --steps 1 --out " +
+                          q(p.dir / "distil-none"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--distill-procedural-only needs --distill-from"), std::string::npos) << r.output;
+}
+
 // gaia world calibrate: the fitted world.copy_bias is stored with the model, lowers the cross-entropy of the
 // training windows it was fitted on, and a second calibration of the result finds the same value (the fit starts
 // from the model's own bias). Bad flags are one error line with nothing written.

@@ -150,7 +150,8 @@ void register_data(CLI::App& app) {
     auto cover = std::make_shared<std::vector<std::string>>(std::vector<std::string>{"weather", "time_of_day", "road"});
     cmd->add_option("--hold-out-by", *by, "hold out whole groups of episodes with the same metadata, e.g. "
                     "source_repo,place (clips of one source and place share a drive): every value of --cover that "
-                    "two or more groups hold gets a held-out group, then groups up to --val-fraction of the frames")
+                    "two or more groups hold gets a held-out group, then groups up to --val-fraction of the frames; "
+                    "procedural drives in the same dataset are held out as the default split holds them out")
         ->delimiter(',');
     cmd->add_option("--cover", *cover, "with --hold-out-by: metadata keys whose values each need a held-out group "
                     "(default weather,time_of_day,road)")->delimiter(',');
@@ -173,8 +174,24 @@ void register_data(CLI::App& app) {
       std::vector<std::string> held = *named;
       double random_frac = *frac;
       if (!by->empty()) {
-        const auto g = data::hold_out_groups(metas, *by, *cover, cmd->count("--val-fraction") ? *frac : 0.15, c.run.seed);
+        // Groups among the recorded episodes; procedural drives (gaia synth, their mirror images and replays) share
+        // no driver or road with anything: they are held out exactly as the default split holds them out.
+        const double share = cmd->count("--val-fraction") ? *frac : 0.15;
+        std::vector<data::EpisodeMeta> recorded;
+        size_t procedural = 0, procedural_held = 0;
+        for (const auto& m : metas) {
+          if (!m.is_procedural()) {
+            recorded.push_back(m);
+            continue;
+          }
+          ++procedural;
+          if (data::held_out_at_random(m.id, data::kDefaultValFraction, c.run.seed)) held.push_back(m.id), ++procedural_held;
+        }
+        if (recorded.empty()) fail("{}: --hold-out-by groups recorded episodes, and this dataset has only procedural ones", *root);
+        const auto g = data::hold_out_groups(recorded, *by, *cover, share, c.run.seed);
         held.insert(held.end(), g.episodes.begin(), g.episodes.end());
+        if (procedural > 0)
+          std::printf("procedural drives: %zu of %zu held out as the default split holds them out\n", procedural_held, procedural);
         random_frac = 0;
         std::string groups;
         for (auto& n : g.groups) groups += (groups.empty() ? "" : "; ") + n;

@@ -38,8 +38,7 @@ void print_repeats(const data::IngestResult& res, const std::string& name) {
 void ingest_manifest(const fs::path& dir, const fs::path& manifest_file, const fs::path& out,
                      const data::IngestOptions& base, const Config& c) {
   if (!fs::is_directory(dir)) fail("{}: not a folder of clips", dir.string());
-  fs::path csv = manifest_file;
-  if (!fs::exists(csv) && csv.is_relative() && fs::exists(dir / csv)) csv = dir / csv;
+  const fs::path csv = data::find_manifest(manifest_file, dir);
   const data::Manifest m = data::read_manifest(csv, dir);
   if (!base.id.empty()) fail("--id names one clip; a manifest names its clips by file");
   if (base.fps > 0) fail("--fps is for one clip; a manifest states each clip's rate in its 'fps' column");

@@ -116,10 +116,12 @@ void register_synth(CLI::App& app) {
       fail("gaia synth counterfactuals: --out must not be the source dataset {}", *source);
     data::Dataset ds(*source);
     // Held-out drives are never replayed: their prompts are what gaia eval and validation measure.
-    const data::Split split = data::load_or_default_split(ds, 0.1, c.run.seed);
+    const data::Split split = data::load_or_default_split(ds, data::kDefaultValFraction, c.run.seed);
     std::vector<std::string> ids;
+    size_t recorded = 0;  // real drives of a mixed dataset: only a rendered drive can be rendered again
     for (size_t e : data::episode_indices(ds, split.train))
-      if (!ds.meta(e).has_any_extra(*without)) ids.push_back(ds.ids()[e]);
+      if (!ds.meta(e).is_procedural()) ++recorded;
+      else if (!ds.meta(e).has_any_extra(*without)) ids.push_back(ds.ids()[e]);
     if (ids.empty()) fail("{}: no training drive to replay{}", *source, without->empty() ? "" : " without " + fmt::format("{}", fmt::join(*without, ", ")));
     synth::CounterfactualOptions opt = *co;
     opt.seed = c.run.seed;
@@ -128,8 +130,9 @@ void register_synth(CLI::App& app) {
     bar.finish();
     if (!fs::exists(fs::path(cflags->out) / "dataset.json"))
       fail("{}: no training drive is {} s long (--lead + --hold), nothing to replay", *source, opt.lead_seconds + opt.hold_seconds);
-    std::printf("wrote %lld replays of %zu training drives (%zu held out, %zu left out by --without-meta) -> %s\n",
-                (long long)n, ids.size(), split.held_out().size(), split.train.size() - ids.size(), cflags->out.c_str());
+    std::printf("wrote %lld replays of %zu training drives (%zu held out, %zu recorded, %zu left out by --without-meta) -> %s\n",
+                (long long)n, ids.size(), split.held_out().size(), recorded, split.train.size() - ids.size() - recorded,
+                cflags->out.c_str());
   });
 }
 

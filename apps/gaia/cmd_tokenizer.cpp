@@ -140,7 +140,11 @@ void register_tokenizer(CLI::App& app) {
         for (const auto& f : set.frames) {
           const data::Episode& ep = *set.episodes[f.episode];
           frames.push_back(data::resize_center_crop(ep.frame_bgr(f.frame), c.data.height, c.data.width));
-          tags.push_back({{"weather", ep.meta().weather}, {"time_of_day", ep.meta().time_of_day}});
+          const auto& m = ep.meta();
+          const auto road = m.extra.find("road");
+          tags.push_back({{"weather", m.weather}, {"time_of_day", m.time_of_day},
+                          {"road", road == m.extra.end() ? "" : road->second}, {"episode", m.id},
+                          {"footage", m.is_procedural() ? "procedural" : "real"}});
         }
       } else {
         frames = load_frames(*src, c.data.height, c.data.width, *max_frames, *stride);

@@ -13,6 +13,7 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/data/episode.h"
+#include "gaia/data/manifest.h"
 
 namespace gaia::app {
 
@@ -59,11 +60,12 @@ void register_train_all(CLI::App& app) {
   auto ship = std::make_shared<std::string>();
   auto skip_eval = std::make_shared<bool>(false);
   auto user_data = std::make_shared<std::string>(), from = std::make_shared<std::string>();
+  auto manifest = std::make_shared<std::string>();
   auto synth_mix = std::make_shared<int>(0);
   // Steps of each stage, each stage one run.
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
-        probe_scene = 2500, probe_dynamics = 4000;
+        probe_scene = 2500, probe_dynamics = 4000, probe_realism = 1500;
   };
   auto st = std::make_shared<Steps>();
   cmd->add_option("--episodes", *episodes, "procedural episodes to render");
@@ -78,7 +80,12 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--swerve", *swerve, "their largest swerve curvature, 1/m (recipe: 0.035)");
   cmd->add_option("--data", *user_data, "your dataset (gaia ingest): tokenizer, tokens, world model and video decoder "
                   "on your drives instead of procedural ones (no probes or gaia eval: they need labelled drives)");
-  cmd->add_option("--synth", *synth_mix, "with --data: also this many procedural drives (of --seconds) mixed in")
+  cmd->add_option("--manifest", *manifest, "with --data: DIR is a folder of clips and this CSV their manifest (gaia "
+                  "ingest --manifest): the clips are ingested with motion from the video, the procedural recipe's "
+                  "drives mixed in, clips held out by source and place, and the models fine-tuned from --from "
+                  "(default: the procedural recipe run first under OUT/procedural): the real-footage release");
+  auto* synth_opt = cmd->add_option("--synth", *synth_mix, "with --data: also this many procedural drives (of --seconds) mixed in "
+                                    "(with --manifest: default --episodes, plus the wandering and swerving drives)")
       ->check(number_in({0, 1e6}));
   cmd->add_option("--from", *from, "with --data: fine-tune the models in this directory (e.g. models: its "
                   "tokenizer's decoder only, so the codes stay; world model and decoder from their weights) instead "
@@ -99,11 +106,22 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
   cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
+  cmd->add_option("--realism-probe-steps", st->probe_realism, "realism probe steps (with --data and procedural drives)");
   add_shared_flags(cmd, flags.get(), "run directory (one folder per stage; default: runs/default)");
   cmd->callback([=] {
     Config c = resolve_config(*flags);  // validates --config / --set before hours of work start
-    if (user_data->empty() && (*synth_mix > 0 || !from->empty())) fail("--synth and --from go with --data DIR");
-    if (!user_data->empty()) {
+    if (user_data->empty() && (*synth_mix > 0 || !from->empty() || !manifest->empty()))
+      fail("--synth, --from and --manifest go with --data DIR");
+    auto synth_given = [synth_opt] { return synth_opt->count() > 0; };
+    if (!manifest->empty()) {
+      // A folder of clips: the manifest is read (and every value checked) before hours of work start.
+      if (!fs::is_directory(*user_data)) fail("--data {}: not a folder of clips", *user_data);
+      *manifest = fs::absolute(data::find_manifest(*manifest, *user_data)).string();
+      (void)data::read_manifest(*manifest, *user_data);
+      if (!from->empty())
+        for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors"})
+          if (!fs::exists(fs::path(*from) / f)) fail("--from {}: no {} there", *from, f);
+    } else if (!user_data->empty()) {
       // Your drives: checked before anything runs (a dataset, of the config's frame size).
       data::Dataset mine(*user_data);
       if (mine.size() == 0) fail("{}: no episodes (gaia ingest adds them)", *user_data);
@@ -126,182 +144,255 @@ void register_train_all(CLI::App& app) {
       a.insert(a.end(), common.begin(), common.end());
       return a;
     };
-    const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
-    const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
-    const std::string tokens = (out / "tokens").string();
     if (st->world_cf < 0) fail("--world-cf-steps must be >= 0, got {}", st->world_cf);
     if (st->world_cf_rounds < 1) fail("--world-cf-rounds must be >= 1, got {}", st->world_cf_rounds);
-    // The fine-tune's rounds write world-cf, world-cf2, ...
-    auto cf_dir = [&](int round) { return out / (round == 1 ? std::string("world-cf") : fmt::format("world-cf{}", round)); };
-    const fs::path first_phase = out / "world" / "world.safetensors";  // the world model before any fine-tune
-    const std::string trained = st->world_cf > 0 ? (cf_dir(st->world_cf_rounds) / "world.safetensors").string() : first_phase.string();
-    const std::string world = (out / "world-calibrated" / "world.safetensors").string();
-    const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
-    const std::string seed = std::to_string(c.run.seed);
-    // A tokenizer run from earlier weights without the GAN term (AdamW 2e-4, 100 warm-up steps, cosine to 1e-5).
-    auto no_gan_run = [&](const std::string& init, int steps, const std::string& dir, std::vector<std::string> extra) {
-      std::vector<std::string> a{"tokenizer", "train", synth, "--init", init, "--steps", std::to_string(steps)};
-      a.insert(a.end(), extra.begin(), extra.end());
-      a.insert(a.end(), {"--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
-                         "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / dir).string()});
-      return with(a);
-    };
-    std::vector<Stage> stages;
-    if (!user_data->empty()) {
-      const std::string data = (out / "data").string(), tk = (out / "tokenizer" / "tokenizer.safetensors").string();
-      const std::string trained_world = (out / "world" / "world.safetensors").string();
-      const fs::path src = *user_data;
-      stages.push_back({"data", {"(link the episodes of " + *user_data + " into " + data + ")"}, out / "data" / ".complete",
-                        true, [src, data] { link_dataset(src, data); }});
-      if (*synth_mix > 0)
-        stages.push_back({"data-synth", with({"synth", "--episodes", std::to_string(*synth_mix), "--seconds",
-                                              fmt::format("{}", *seconds), "--seed", "1", "--out", data}),
-                          out / "data" / ".complete-synth", true});
-      const std::string tsteps = std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps);
-      if (from->empty()) {
-        stages.push_back({"tokenizer", with({"tokenizer", "train", data, "--steps", tsteps, "--out", (out / "tokenizer").string()}), tk});
-      } else {
-        // The decoder alone: every frame keeps the shipped codes, so the shipped world model and decoder still fit.
-        stages.push_back({"tokenizer", with({"tokenizer", "train", data, "--init", (fs::path(*from) / "tokenizer.safetensors").string(),
-                                             "--decoder-only", "--set", "tokenizer.ema_decay=0.999", "--steps", tsteps,
-                                             "--out", (out / "tokenizer").string()}), tk});
-      }
-      stages.push_back({"tokens", with({"tokenize", data, "--tokenizer", tk, "--mirror", "--out", tokens}),
-                        out / "tokens" / "dataset.json"});
-      std::vector<std::string> wa{"world", "train", tokens, "--steps", std::to_string(st->world)};
-      if (!from->empty())
-        wa.insert(wa.end(), {"--init", (fs::path(*from) / "world.safetensors").string(), "--set", "world.lr=2e-4",
-                             "--set", "world.warmup_steps=50"});
-      wa.insert(wa.end(), {"--out", (out / "world").string()});
-      stages.push_back({"world", with(wa), trained_world});
-      stages.push_back({"world-calibrate", with({"world", "calibrate", tokens, "--world", trained_world, "--out", world}), world});
-      std::vector<std::string> da{"decoder", "train", data, "--tokenizer", tk, "--steps", std::to_string(st->decoder)};
-      if (!from->empty()) da.insert(da.end(), {"--init", (fs::path(*from) / "decoder.safetensors").string()});
-      da.insert(da.end(), {"--out", (out / "decoder").string()});
-      stages.push_back({"decoder", with(da), decoder});
-      if (!*skip_eval)
-        stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
-                          out / "world-eval" / "eval.json"});
-      if (!ship->empty())
-        for (auto& [f, to] : std::vector<std::pair<std::string, std::string>>{
-                 {tk, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"}})
-          stages.push_back({"ship " + to, {"convert", f, "--half", "--out", (fs::path(*ship) / to).string()},
-                            fs::path(*ship) / to});
-    } else {
-    stages = {
-        {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
-                       "--seed", "1", "--out", synth}),
-         out / "synth" / ".complete", true},
-        {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
-                            "--out", (out / "tokenizer").string()}),
-         out / "tokenizer" / "tokenizer.safetensors"},
-        {"tokenizer-ft", no_gan_run((out / "tokenizer" / "tokenizer.safetensors").string(), st->finetune, "tokenizer-ft", {}),
-         tok_ft},
-        // Every drive also in mirror image (data/mirror.h): the world model sees as many right turns as left ones.
-        {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
-        {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
-         first_phase},
-        // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
-        // then copy from frame to frame as often as the real drives do.
-        {"world-calibrate",
-         with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--without-meta",
-               "replay_of", "--out", world}),
-         world},
-        {"decoder",
-         with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
-               (out / "decoder").string()}),
-         decoder},
-        // Half of its frames read through the final tokenizer, as gaia eval reads generated frames.
-        {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--tokenizer",
-                              tok, "--decoded-share", "0.5", "--out", (out / "probe-scene").string()}),
-         out / "probe-scene" / "probe-scene.safetensors"},
-        {"probe-dynamics",
-         with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
-         out / "probe-dynamics" / "probe-dynamics.safetensors"},
-    };
-    // Further drives into the same dataset, right after the lane-keeping ones (docs/synth.md): wandering, then
-    // wandering and swerving. Each is its own resumable stage with its own episode indices.
     if (*wander_episodes < 0) fail("--wander-episodes must be >= 0, got {}", *wander_episodes);
     if (*swerve_episodes < 0) fail("--swerve-episodes must be >= 0, got {}", *swerve_episodes);
-    // The decoder alone, encoder and codebook frozen, grown by two full-resolution and two token-grid blocks and
-    // averaged over its steps: the blocks start as identities and learn what the fine-tuned decoder
-    // still misses, and every frame keeps the codes of tokenizer-ft. (The config defaults stay 0 so that weights
-    // saved before these keys existed load as saved.)
-    if (st->refine > 0)
-      stages.insert(stages.begin() + 3,
-                    {"tokenizer-refine",
-                     no_gan_run(tok_ft, st->refine, "tokenizer-refine",
-                                {"--decoder-only", "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.token_blocks=2",
-                                 "--set", "tokenizer.ema_decay=0.999"}),
-                     tok});
-    // Counterfactual replays of the lane-keeping training drives under held random steering commands, added to the
-    // tokens after the world model's first phase, which then fine-tunes on both at half its rate, more often
-    // action-conditioned (0.6 / 0.25 / 0.15), its text-only and unconditional predictions held to the first phase's
-    // (--distill-from): the replays show what a command does from the states a prompt shows (synth/counterfactual.h)
-    // without costing the text conditioning.
-    if (st->world_cf > 0) {
-      const std::string cf = (out / "synth-cf").string(), first = first_phase.string();
-      const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
-      std::vector<Stage> cf_stages = {
+    const std::string seed = std::to_string(c.run.seed);
+    // Further procedural drives into `dataset`, right after its `first` lane-keeping ones (docs/synth.md):
+    // wandering, then wandering and swerving. Each is its own resumable stage with its own episode indices.
+    auto more_drives = [&](const std::string& dataset, int first) {
+      std::vector<Stage> v;
+      auto drives = [&](const std::string& kind, int n, int at, std::vector<std::string> driver) {
+        if (n == 0) return;
+        std::vector<std::string> a{"synth", "--episodes", std::to_string(n), "--first", std::to_string(at),
+                                   "--seconds", fmt::format("{}", *seconds), "--seed", "1"};
+        a.insert(a.end(), driver.begin(), driver.end());
+        a.insert(a.end(), {"--out", dataset});
+        v.push_back({"data-" + kind, with(a), fs::path(dataset) / (".complete-" + kind), true});
+      };
+      drives("wander", *wander_episodes, first, {"--wander", fmt::format("{}", *wander)});
+      drives("swerve", *swerve_episodes, first + *wander_episodes,
+             {"--wander", fmt::format("{}", *wander), "--swerve", fmt::format("{}", *swerve)});
+      return v;
+    };
+    // Counterfactual replays of the lane-keeping training drives of `dataset` under held random steering commands
+    // (synth/counterfactual.h: what a command does from the states a prompt shows), tokenized into `tokens`.
+    auto counterfactuals = [&](const fs::path& out, const std::string& dataset, const std::string& tok,
+                               const std::string& tokens) {
+      const std::string cf = (out / "synth-cf").string();
+      return std::vector<Stage>{
           {"data-counterfactuals",
-           with({"synth", "counterfactuals", synth, "--without-meta", "synth_wander", "--per-episode", "6", "--lead",
+           with({"synth", "counterfactuals", dataset, "--without-meta", "synth_wander", "--per-episode", "6", "--lead",
                  "1.5", "--hold", "2", "--max-curvature", "0.045", "--out", cf}),
            out / "synth-cf" / ".complete", true},
           {"tokens-cf", with({"tokenize", cf, "--tokenizer", tok, "--mirror", "--out", tokens}),
-           out / "tokens" / ".complete-cf", true}};
-      // Each round starts from the round before; every round is held to the first phase, not to the round before.
-      for (int round = 1; round <= st->world_cf_rounds; ++round) {
-        const std::string init = round == 1 ? first : (cf_dir(round - 1) / "world.safetensors").string();
-        cf_stages.push_back({cf_dir(round).filename().string(),
-                             with({"world", "train", tokens, "--init", init, "--distill-from", first, "--steps",
-                                   std::to_string(st->world_cf), "--set", "world.lr=1.5e-4", "--set",
-                                   "world.warmup_steps=50", "--set", "world.p_action=0.6", "--set", "world.p_text=0.25",
-                                   "--set", "world.p_uncond=0.15", "--out", cf_dir(round).string()}),
-                             cf_dir(round) / "world.safetensors"});
-      }
-      stages.insert(at, cf_stages.begin(), cf_stages.end());
-    }
-    std::vector<Stage> more_drives;
-    auto drives = [&](const std::string& kind, int n, int first, std::vector<std::string> driver) {
-      if (n == 0) return;
-      std::vector<std::string> a{"synth", "--episodes", std::to_string(n), "--first", std::to_string(first),
-                                 "--seconds", fmt::format("{}", *seconds), "--seed", "1"};
-      a.insert(a.end(), driver.begin(), driver.end());
-      a.insert(a.end(), {"--out", synth});
-      more_drives.push_back({"data-" + kind, with(a), out / "synth" / (".complete-" + kind), true});
+           fs::path(tokens) / ".complete-cf", true}};
     };
-    drives("wander", *wander_episodes, *episodes, {"--wander", fmt::format("{}", *wander)});
-    drives("swerve", *swerve_episodes, *episodes + *wander_episodes,
-           {"--wander", fmt::format("{}", *wander), "--swerve", fmt::format("{}", *swerve)});
-    stages.insert(stages.begin() + 1, more_drives.begin(), more_drives.end());
-    if (!*skip_eval) {
-      stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
-                        out / "world-eval" / "eval.json"});
-      stages.push_back({"decoder-eval",
-                        with({"decoder", "eval", synth, "--tokenizer", tok, "--decoder", decoder, "--steps", "50,20,10",
-                              "--out", (out / "decoder-eval").string()}),
-                        out / "decoder-eval" / "eval.json"});
-      stages.push_back({"eval",
-                        with({"eval", tokens, synth, "--world", world, "--tokenizer", tok,
-                              "--dynamics-probe", (out / "probe-dynamics" / "probe-dynamics.safetensors").string(),
-                              "--scene-probe", (out / "probe-scene" / "probe-scene.safetensors").string(),
-                              "--world-eval", (out / "world-eval").string(), "--metrics",
-                              "world=" + (out / "world" / "metrics.jsonl").string(),
-                              "decoder=" + (out / "decoder" / "metrics.jsonl").string(),
-                              "tokenizer=" + (out / "tokenizer" / "metrics.jsonl").string(), "--out",
-                              (out / "eval").string()}),
-                        out / "eval" / "report.html"});
+    // The procedural recipe under `out`; `ship`: also fp16 copies of its five models there.
+    auto procedural = [&](const fs::path& out, const std::string& ship) {
+      const std::string synth = (out / "synth").string(), tok_ft = (out / "tokenizer-ft" / "tokenizer.safetensors").string();
+      const std::string tok = st->refine > 0 ? (out / "tokenizer-refine" / "tokenizer.safetensors").string() : tok_ft;
+      const std::string tokens = (out / "tokens").string();
+      // The fine-tune's rounds write world-cf, world-cf2, ...
+      auto cf_dir = [&](int round) { return out / (round == 1 ? std::string("world-cf") : fmt::format("world-cf{}", round)); };
+      const fs::path first_phase = out / "world" / "world.safetensors";  // the world model before any fine-tune
+      const std::string trained = st->world_cf > 0 ? (cf_dir(st->world_cf_rounds) / "world.safetensors").string() : first_phase.string();
+      const std::string world = (out / "world-calibrated" / "world.safetensors").string();
+      const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
+      // A tokenizer run from earlier weights without the GAN term (AdamW 2e-4, 100 warm-up steps, cosine to 1e-5).
+      auto no_gan_run = [&](const std::string& init, int steps, const std::string& dir, std::vector<std::string> extra) {
+        std::vector<std::string> a{"tokenizer", "train", synth, "--init", init, "--steps", std::to_string(steps)};
+        a.insert(a.end(), extra.begin(), extra.end());
+        a.insert(a.end(), {"--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=2e-4", "--set",
+                           "tokenizer.warmup_steps=100", "--set", "tokenizer.final_lr=1e-5", "--out", (out / dir).string()});
+        return with(a);
+      };
+      std::vector<Stage> stages = {
+          {"data", with({"synth", "--episodes", std::to_string(*episodes), "--seconds", fmt::format("{}", *seconds),
+                         "--seed", "1", "--out", synth}),
+           out / "synth" / ".complete", true},
+          {"tokenizer", with({"tokenizer", "train", synth, "--steps", std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps),
+                              "--out", (out / "tokenizer").string()}),
+           out / "tokenizer" / "tokenizer.safetensors"},
+          {"tokenizer-ft", no_gan_run((out / "tokenizer" / "tokenizer.safetensors").string(), st->finetune, "tokenizer-ft", {}),
+           tok_ft},
+          // Every drive also in mirror image (data/mirror.h): the world model sees as many right turns as left ones.
+          {"tokens", with({"tokenize", synth, "--tokenizer", tok, "--mirror", "--out", tokens}), out / "tokens" / "dataset.json"},
+          {"world", with({"world", "train", tokens, "--steps", std::to_string(st->world), "--out", (out / "world").string()}),
+           first_phase},
+          // world.copy_bias fitted on the lane-keeping drives, the kind gaia demo and gaia eval roll out: long rollouts
+          // then copy from frame to frame as often as the real drives do.
+          {"world-calibrate",
+           with({"world", "calibrate", tokens, "--world", trained, "--without-meta", "synth_wander", "--without-meta",
+                 "replay_of", "--out", world}),
+           world},
+          {"decoder",
+           with({"decoder", "train", synth, "--tokenizer", tok, "--steps", std::to_string(st->decoder), "--out",
+                 (out / "decoder").string()}),
+           decoder},
+          // Half of its frames read through the final tokenizer, as gaia eval reads generated frames.
+          {"probe-scene", with({"probe", "train", "scene", synth, "--steps", std::to_string(st->probe_scene), "--tokenizer",
+                                tok, "--decoded-share", "0.5", "--out", (out / "probe-scene").string()}),
+           out / "probe-scene" / "probe-scene.safetensors"},
+          {"probe-dynamics",
+           with({"probe", "train", "dynamics", synth, "--steps", std::to_string(st->probe_dynamics), "--out", (out / "probe-dynamics").string()}),
+           out / "probe-dynamics" / "probe-dynamics.safetensors"},
+      };
+      // The decoder alone, encoder and codebook frozen, grown by two full-resolution and two token-grid blocks and
+      // averaged over its steps: the blocks start as identities and learn what the fine-tuned decoder
+      // still misses, and every frame keeps the codes of tokenizer-ft. (The config defaults stay 0 so that weights
+      // saved before these keys existed load as saved.)
+      if (st->refine > 0)
+        stages.insert(stages.begin() + 3,
+                      {"tokenizer-refine",
+                       no_gan_run(tok_ft, st->refine, "tokenizer-refine",
+                                  {"--decoder-only", "--set", "tokenizer.refine_blocks=2", "--set", "tokenizer.token_blocks=2",
+                                   "--set", "tokenizer.ema_decay=0.999"}),
+                       tok});
+      // The counterfactual replays are added to the tokens after the world model's first phase, which then
+      // fine-tunes on both at half its rate, more often action-conditioned (0.6 / 0.25 / 0.15), its text-only and
+      // unconditional predictions held to the first phase's (--distill-from), so the replays cost nothing of the
+      // text conditioning.
+      if (st->world_cf > 0) {
+        const std::string first = first_phase.string();
+        const auto at = std::find_if(stages.begin(), stages.end(), [](const Stage& x) { return x.name == "world"; }) + 1;
+        std::vector<Stage> cf_stages = counterfactuals(out, synth, tok, tokens);
+        // Each round starts from the round before; every round is held to the first phase, not to the round before.
+        for (int round = 1; round <= st->world_cf_rounds; ++round) {
+          const std::string init = round == 1 ? first : (cf_dir(round - 1) / "world.safetensors").string();
+          cf_stages.push_back({cf_dir(round).filename().string(),
+                               with({"world", "train", tokens, "--init", init, "--distill-from", first, "--steps",
+                                     std::to_string(st->world_cf), "--set", "world.lr=1.5e-4", "--set",
+                                     "world.warmup_steps=50", "--set", "world.p_action=0.6", "--set", "world.p_text=0.25",
+                                     "--set", "world.p_uncond=0.15", "--out", cf_dir(round).string()}),
+                               cf_dir(round) / "world.safetensors"});
+        }
+        stages.insert(at, cf_stages.begin(), cf_stages.end());
+      }
+      const auto drives = more_drives(synth, *episodes);
+      stages.insert(stages.begin() + 1, drives.begin(), drives.end());
+      if (!*skip_eval) {
+        stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
+                          out / "world-eval" / "eval.json"});
+        stages.push_back({"decoder-eval",
+                          with({"decoder", "eval", synth, "--tokenizer", tok, "--decoder", decoder, "--steps", "50,20,10",
+                                "--out", (out / "decoder-eval").string()}),
+                          out / "decoder-eval" / "eval.json"});
+        stages.push_back({"eval",
+                          with({"eval", tokens, synth, "--world", world, "--tokenizer", tok,
+                                "--dynamics-probe", (out / "probe-dynamics" / "probe-dynamics.safetensors").string(),
+                                "--scene-probe", (out / "probe-scene" / "probe-scene.safetensors").string(),
+                                "--world-eval", (out / "world-eval").string(), "--metrics",
+                                "world=" + (out / "world" / "metrics.jsonl").string(),
+                                "decoder=" + (out / "decoder" / "metrics.jsonl").string(),
+                                "tokenizer=" + (out / "tokenizer" / "metrics.jsonl").string(), "--out",
+                                (out / "eval").string()}),
+                          out / "eval" / "report.html"});
+      }
+      if (!ship.empty()) {
+        const std::vector<std::pair<std::string, std::string>> files = {
+            {tok, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"},
+            {(out / "probe-scene" / "probe-scene.safetensors").string(), "probe-scene.safetensors"},
+            {(out / "probe-dynamics" / "probe-dynamics.safetensors").string(), "probe-dynamics.safetensors"}};
+        for (auto& [file, to] : files)
+          stages.push_back({"ship " + to, {"convert", file, "--half", "--out", (fs::path(ship) / to).string()},
+                            fs::path(ship) / to});
+      }
+      return stages;
+    };
+
+    std::vector<Stage> stages;
+    if (user_data->empty()) {
+      stages = procedural(out, *ship);
+    } else {
+      const bool clips = !manifest->empty();
+      const std::string data = (out / "data").string(), tk = (out / "tokenizer" / "tokenizer.safetensors").string();
+      const std::string tokens = (out / "tokens").string(), trained_world = (out / "world" / "world.safetensors").string();
+      const std::string world = (out / "world-calibrated" / "world.safetensors").string();
+      const std::string decoder = (out / "decoder" / "decoder.safetensors").string();
+      fs::path base = *from;  // the models this run fine-tunes ("" = none: from nothing)
+      if (clips && base.empty()) {
+        // The release from nothing: the procedural recipe first, its models shipped into OUT/procedural/release,
+        // then the fine-tune on the clips and procedural drives together.
+        auto first = procedural(out / "procedural", (out / "procedural" / "release").string());
+        stages.insert(stages.end(), first.begin(), first.end());
+        base = out / "procedural" / "release";
+      }
+      fs::path src = *user_data;
+      if (clips) {
+        src = out / "real";
+        stages.push_back({"ingest", with({"ingest", *user_data, "--manifest", *manifest, "--motion", "video", "--out", src.string()}),
+                          src / ".complete", true});
+      }
+      stages.push_back({"data", {"(link the episodes of " + src.string() + " into " + data + ")"}, out / "data" / ".complete",
+                        true, [src, data] { link_dataset(src, data); }});
+      // Procedural drives mixed in: --synth lane-keeping ones (with a manifest: the recipe's --episodes, then its
+      // wandering and swerving drives).
+      const int lane = clips && !synth_given() ? *episodes : *synth_mix;
+      if (lane > 0)
+        stages.push_back({"data-synth", with({"synth", "--episodes", std::to_string(lane), "--seconds",
+                                              fmt::format("{}", *seconds), "--seed", "1", "--out", data}),
+                          out / "data" / ".complete-synth", true});
+      if (clips) {
+        const auto drives = more_drives(data, lane);
+        stages.insert(stages.end(), drives.begin(), drives.end());
+        // Clips held out by source and place (no held-out clip shares a drive with a training clip), every
+        // condition on both sides where the clips allow; procedural drives as the default split holds them out.
+        stages.push_back({"split", with({"data", "split", data, "--hold-out-by", "source_repo,place"}), out / "data" / "split.json"});
+      }
+      const std::string tsteps = std::to_string(st->tokenizer > 0 ? st->tokenizer : c.tokenizer.steps);
+      if (base.empty()) {
+        stages.push_back({"tokenizer", with({"tokenizer", "train", data, "--steps", tsteps, "--out", (out / "tokenizer").string()}), tk});
+      } else {
+        // The decoder alone, without the GAN term: every frame keeps the codes the world model and the video
+        // decoder were trained on, so they fit from the first step. Half of each batch real when procedural drives
+        // are mixed in.
+        std::vector<std::string> a{"tokenizer", "train", data, "--init", (base / "tokenizer.safetensors").string(),
+                                   "--decoder-only", "--steps", tsteps, "--set", "tokenizer.ema_decay=0.999",
+                                   "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=1e-4", "--set",
+                                   "tokenizer.warmup_steps=50", "--set", "tokenizer.final_lr=1e-5"};
+        if (lane > 0) a.insert(a.end(), {"--set", "data.balance_tokenizer=[footage]", "--set", "data.balance_exponent=1"});
+        a.insert(a.end(), {"--out", (out / "tokenizer").string()});
+        stages.push_back({"tokenizer", with(a), tk});
+      }
+      stages.push_back({"tokens", with({"tokenize", data, "--tokenizer", tk, "--mirror", "--out", tokens}),
+                        out / "tokens" / "dataset.json"});
+      if (clips && st->world_cf > 0) {
+        const auto cf = counterfactuals(out, data, tk, tokens);
+        stages.insert(stages.end(), cf.begin(), cf.end());
+      }
+      std::vector<std::string> wa{"world", "train", tokens, "--steps", std::to_string(st->world)};
+      if (!base.empty()) {
+        const std::string w = (base / "world.safetensors").string();
+        wa.insert(wa.end(), {"--init", w, "--set", "world.lr=2e-4", "--set", "world.warmup_steps=50"});
+        // Procedural windows held to the model fine-tuned, which knows that world; real ones learn freely.
+        if (lane > 0) wa.insert(wa.end(), {"--distill-from", w, "--distill-procedural-only"});
+      }
+      if (lane > 0)  // footage a balancing feature: real windows drawn as often as sqrt of their share allows
+        wa.insert(wa.end(), {"--set", "data.balance_world=[footage,latitude,longitude,weather,steering,speed]"});
+      wa.insert(wa.end(), {"--out", (out / "world").string()});
+      stages.push_back({"world", with(wa), trained_world});
+      std::vector<std::string> ca{"world", "calibrate", tokens, "--world", trained_world};
+      if (lane > 0) ca.insert(ca.end(), {"--without-meta", "synth_wander", "--without-meta", "replay_of"});
+      ca.insert(ca.end(), {"--out", world});
+      stages.push_back({"world-calibrate", with(ca), world});
+      std::vector<std::string> da{"decoder", "train", data, "--tokenizer", tk, "--steps", std::to_string(st->decoder)};
+      if (!base.empty()) da.insert(da.end(), {"--init", (base / "decoder.safetensors").string()});
+      da.insert(da.end(), {"--out", (out / "decoder").string()});
+      stages.push_back({"decoder", with(da), decoder});
+      const std::string realism = (out / "probe-realism" / "probe-realism.safetensors").string();
+      // Real or procedural: what reads whether futures of a real prompt stay real (where the drives are recorded).
+      bool recorded = clips;
+      if (!clips) {
+        data::Dataset mine(src);
+        for (size_t e = 0; e < mine.size() && !recorded; ++e) recorded = !mine.meta(e).is_procedural();
+      }
+      if (lane > 0 && recorded)
+        stages.push_back({"probe-realism", with({"probe", "train", "realism", data, "--steps", std::to_string(st->probe_realism),
+                                                 "--out", (out / "probe-realism").string()}), realism});
+      if (!*skip_eval)
+        stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
+                          out / "world-eval" / "eval.json"});
+      if (!ship->empty()) {
+        std::vector<std::pair<std::string, std::string>> files = {
+            {tk, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"}};
+        if (lane > 0 && recorded) files.push_back({realism, "probe-realism.safetensors"});
+        for (auto& [file, to] : files)
+          stages.push_back({"ship " + to, {"convert", file, "--half", "--out", (fs::path(*ship) / to).string()},
+                            fs::path(*ship) / to});
+      }
     }
-    if (!ship->empty()) {
-      const std::vector<std::pair<std::string, std::string>> files = {
-          {tok, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"},
-          {(out / "probe-scene" / "probe-scene.safetensors").string(), "probe-scene.safetensors"},
-          {(out / "probe-dynamics" / "probe-dynamics.safetensors").string(), "probe-dynamics.safetensors"}};
-      for (auto& [from, to] : files)
-        stages.push_back({"ship " + to, {"convert", from, "--half", "--out", (fs::path(*ship) / to).string()},
-                          fs::path(*ship) / to});
-    }
-    }  // the procedural recipe
     fs::create_directories(out);
     nlohmann::json log = nlohmann::json::array();
     for (size_t i = 0; i < stages.size(); ++i) {

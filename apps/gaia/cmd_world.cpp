@@ -65,6 +65,9 @@ void register_world(CLI::App& app) {
     cmd->add_flag("--distill-other-text", o->distill_other_text,
                   "with --distill-from: also keep its text-conditioned predictions when half the batch is given other "
                   "examples' captions (prompts that contradict the frames, as text prompting does); ~1.5x step time");
+    cmd->add_flag("--distill-procedural-only", o->distill_procedural_only,
+                  "with --distill-from: hold only windows of procedural drives (gaia synth) to it: a teacher that has "
+                  "never seen recorded footage keeps the procedural world and teaches nothing about real frames");
     auto t5 = std::make_shared<std::string>();
     add_weights_flag(cmd, Weights::T5, t5.get(),
                      "text as its embeddings (§2.1): the captions are embedded first, once (gaia text embed), "

@@ -27,7 +27,7 @@ FrameSet merge(FrameSet a, FrameSet b) {
 }
 
 std::vector<std::string> held_out_ids(const Dataset& ds, uint64_t seed) {
-  auto ids = load_or_default_split(ds, 0.1, seed).held_out();
+  auto ids = load_or_default_split(ds, kDefaultValFraction, seed).held_out();
   return ids.empty() ? ds.ids() : ids;
 }
 

@@ -51,12 +51,15 @@ std::string split_source_id(const std::string& id);
 
 Split read_split(const fs::path& file);  // a split.json; errors name the file
 
+// The share of episodes the default split holds out at random.
+constexpr double kDefaultValFraction = 0.1;
+
 // DATASET/split.json when present (from `gaia data split`), otherwise a seeded random hold-out of `frac` of the
 // episodes (at least one when there are two or more, and never all of them) so that training always has a validation
 // set and a training set.
-Split load_or_default_split(const Dataset& ds, double frac = 0.1, uint64_t seed = 0);
+Split load_or_default_split(const Dataset& ds, double frac = kDefaultValFraction, uint64_t seed = 0);
 // The same for any directory of episodes `ids` (e.g. a token dataset, which carries its source's split.json).
-Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac = 0.1,
+Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac = kDefaultValFraction,
                             uint64_t seed = 0);
 std::vector<size_t> episode_indices(const Dataset& ds, const std::vector<std::string>& ids);  // ids -> Dataset indices
 

@@ -45,6 +45,11 @@ bool valid_id(const std::string& id) {
 
 }  // namespace
 
+fs::path find_manifest(const fs::path& csv, const fs::path& clips) {
+  if (!fs::exists(csv) && csv.is_relative() && fs::exists(clips / csv)) return clips / csv;
+  return csv;
+}
+
 Manifest read_manifest(const fs::path& csv, const fs::path& clips) {
   if (!fs::is_regular_file(csv)) fail("{}: no such manifest file", csv.string());
   Manifest m;

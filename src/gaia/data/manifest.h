@@ -51,6 +51,8 @@ const std::vector<std::string>& manifest_values(const std::string& column);  // 
 // error here (ingest reports it by name and goes on with the others).
 // `clips`: the folder the file names are relative to.
 Manifest read_manifest(const fs::path& csv, const fs::path& clips);
+// Where `--manifest csv` is: the path as given, else (a relative one) inside the folder of clips.
+fs::path find_manifest(const fs::path& csv, const fs::path& clips);
 
 // The caption of a clip's frame at `time_s`: its conditions phrase (worded as the procedural world's captions, the
 // wording varying from second to second) and its road, e.g. "rainy day, on a highway".

@@ -130,7 +130,7 @@ DecoderTrainResult train_decoder(const Config& cfg, const DecoderTrainOptions& o
          tok->width, cfg.data.height, cfg.data.width);
 
   data::Dataset ds(opt.dataset);
-  data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  data::Split split = data::load_or_default_split(ds, data::kDefaultValFraction, cfg.run.seed);
   auto val_ids = split.held_out();
   const int T = dc.frames;
   ClipPool train = make_pool(ds, data::episode_indices(ds, split.train), T, true);

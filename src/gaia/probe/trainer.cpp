@@ -229,7 +229,7 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   ProbeTrainResult result;
   train::RunDir run_dir(opt.out, on_note);  // one run per --out; a checkpoint a kill broke is put back
   data::Dataset ds(opt.dataset);
-  auto split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  auto split = data::load_or_default_split(ds, data::kDefaultValFraction, cfg.run.seed);
   auto val_ids = split.held_out();
   torch::manual_seed(cfg.run.seed);
   ProbeNet net(opt.kind, opt.frames);

@@ -56,6 +56,23 @@ nlohmann::json evaluate_reconstruction(ImageTokenizer& t, const Config& c, const
     for (const auto& [value, sum] : values) g[value] = sum.mean();
     j["by_" + key] = g;
   }
+  // Per clip: the median and the worst episode's PSNR, for real footage and procedural drives apart (an average
+  // over frames lets long drives outvote short clips).
+  if (groups.count("episode") && !tags.empty()) {
+    std::map<std::string, std::string> kind_of;  // episode -> footage
+    for (const auto& t : tags)
+      if (t.count("episode")) kind_of[t.at("episode")] = t.count("footage") ? t.at("footage") : "all";
+    std::map<std::string, std::vector<std::pair<double, std::string>>> per_kind;
+    for (const auto& [ep, sum] : groups.at("episode")) per_kind[kind_of[ep]].push_back({sum.psnr / double(sum.n), ep});
+    nlohmann::json clips = nlohmann::json::object();
+    for (auto& [kind, v] : per_kind) {
+      std::sort(v.begin(), v.end());
+      const size_t n = v.size();
+      const double median = n % 2 ? v[n / 2].first : 0.5 * (v[n / 2 - 1].first + v[n / 2].first);
+      clips[kind] = {{"episodes", n}, {"median_psnr", median}, {"worst_psnr", v.front().first}, {"worst_episode", v.front().second}};
+    }
+    j["by_clip"] = clips;
+  }
   return j;
 }
 

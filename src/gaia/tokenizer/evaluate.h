@@ -21,7 +21,8 @@ using FrameTags = std::map<std::string, std::string>;
 
 // frames (BGR, the tokenizer's size) and their tags (empty, or one per frame) ->
 //   {"frames", "psnr", "ssim", "code_usage", "code_perplexity", "bit_compression",
-//    "by_<tag>": {"<value>": {"frames", "psnr", "ssim"}, ...}, ...}
+//    "by_<tag>": {"<value>": {"frames", "psnr", "ssim"}, ...}, ...,
+//    "by_clip": {"<footage>": {"episodes", "median_psnr", "worst_psnr", "worst_episode"}}  (with "episode" tags)}
 // progress(frames done) after each batch.
 nlohmann::json evaluate_reconstruction(ImageTokenizer& t, const Config& c, const std::vector<cv::Mat>& frames,
                                        const std::vector<FrameTags>& tags, const torch::Device& device,

@@ -79,7 +79,7 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
   const auto run_dir = train::claim_run_dir(opt.out, dist, note);
 
   data::Dataset ds(opt.dataset);
-  data::Split split = data::load_or_default_split(ds, 0.1, cfg.run.seed);
+  data::Split split = data::load_or_default_split(ds, data::kDefaultValFraction, cfg.run.seed);
   auto train_eps = data::episode_indices(ds, split.train);
   auto val_ids = split.held_out();
   auto val_eps = data::episode_indices(ds, val_ids);

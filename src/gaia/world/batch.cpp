@@ -11,21 +11,23 @@ torch::Tensor steps_of(const torch::Tensor& t, int64_t t0, int64_t t1) { return 
 
 WorldBatch WorldBatch::to(const torch::Device& d) const {
   return WorldBatch{to_device(tokens, d),     to_device(actions, d),    to_device(text_ids, d),
-                    to_device(text_emb, d),   to_device(use_action, d), to_device(use_text, d)};
+                    to_device(text_emb, d),   to_device(use_action, d), to_device(use_text, d),
+                    to_device(procedural, d)};
 }
 
 WorldBatch WorldBatch::slice_steps(int64_t t0, int64_t t1) const {
   if (!(0 <= t0 && t0 < t1 && t1 <= steps()))
     fail("slice_steps: [{}, {}) is not a range of the batch's {} steps", t0, t1, steps());
   return WorldBatch{steps_of(tokens, t0, t1), steps_of(actions, t0, t1), steps_of(text_ids, t0, t1),
-                    steps_of(text_emb, t0, t1), use_action, use_text};
+                    steps_of(text_emb, t0, t1), use_action, use_text, procedural};
 }
 
 WorldBatch WorldBatch::examples(int64_t b0, int64_t b1) const {
   if (!(0 <= b0 && b0 < b1 && b1 <= batch()))
     fail("examples: [{}, {}) is not a range of the batch's {} examples", b0, b1, batch());
   auto part = [&](const torch::Tensor& t) { return t.defined() ? t.slice(0, b0, b1) : t; };
-  return WorldBatch{part(tokens), part(actions), part(text_ids), part(text_emb), part(use_action), part(use_text)};
+  return WorldBatch{part(tokens), part(actions), part(text_ids), part(text_emb), part(use_action), part(use_text),
+                    part(procedural)};
 }
 
 WorldBatch WorldBatch::with_rolled_text(int64_t n) const {
@@ -35,7 +37,7 @@ WorldBatch WorldBatch::with_rolled_text(int64_t n) const {
   auto first = [&](const torch::Tensor& t) { return t.slice(0, 0, n); };
   auto opts = torch::TensorOptions().dtype(torch::kBool).device(tokens.device());
   return WorldBatch{first(tokens), first(actions), rolled(text_ids), rolled(text_emb), torch::zeros({n}, opts),
-                    torch::ones({n}, opts)};
+                    torch::ones({n}, opts), procedural.defined() ? first(procedural) : procedural};
 }
 
 }  // namespace gaia::world

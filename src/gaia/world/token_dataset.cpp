@@ -363,6 +363,7 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const Te
   auto text_ids = text ? torch::zeros({B, T, m}, torch::kInt64) : torch::Tensor();
   auto text_emb = source.embeddings ? torch::empty({B, T, text_emb_.m, text_emb_.dim}) : torch::Tensor();
   auto use_action = torch::empty({B}, torch::kBool), use_text = torch::empty({B}, torch::kBool);
+  auto procedural = torch::empty({B}, torch::kBool);
   int64_t* tp = tokens.data_ptr<int64_t>();
   float* ap = act.data_ptr<float>();
   auto ua = use_action.accessor<bool, 1>(), ut = use_text.accessor<bool, 1>();
@@ -391,6 +392,7 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const Te
     Conditioning c = mix.draw(rng, meta(w.episode).is_replay());
     ua[b] = c == Conditioning::kAction;
     ut[b] = c == Conditioning::kText;
+    procedural[b] = meta(w.episode).is_procedural();
   }
   WorldBatch out;
   out.tokens = tokens;
@@ -399,6 +401,7 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const Te
   out.text_emb = text_emb;
   out.use_action = use_action;
   out.use_text = use_text;
+  out.procedural = procedural;
   return out;
 }
 

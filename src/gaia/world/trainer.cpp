@@ -209,8 +209,9 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
       if (!ds.has_captions()) fail("--distill-other-text: {} has no captions", opt.tokens.string());
       note("... and text-conditioned predictions under other examples' captions");
     }
-  } else if (opt.distill_other_text) {
-    fail("--distill-other-text needs --distill-from (the weights whose predictions it keeps)");
+  } else if (opt.distill_other_text || opt.distill_procedural_only) {
+    fail("{} needs --distill-from (the weights whose predictions it keeps)",
+         opt.distill_other_text ? "--distill-other-text" : "--distill-procedural-only");
   }
   if (main) fs::create_directories(opt.out);
   train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
@@ -307,13 +308,18 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
           return v;
         };
         // A batch of action-conditioned examples only has nothing to distil: no teacher pass for it.
-        if (teacher && !batch.use_action.all().item<bool>())
-          kl += distil(teacher_batch, logits, batch.use_action.logical_not()) / accumulate;
+        auto distilled = [&](const torch::Tensor& keep) {
+          return opt.distill_procedural_only ? keep.logical_and(batch.procedural.slice(0, 0, keep.size(0))) : keep;
+        };
+        const auto keep = distilled(batch.use_action.logical_not());
+        if (teacher && keep.any().item<bool>()) kl += distil(teacher_batch, logits, keep) / accumulate;
         if (teacher && opt.distill_other_text) {
           // Half the batch is enough to cover the contradicting prompts, at about half a step's cost.
           const int64_t half = std::max<int64_t>(1, batch.batch() / 2);
           auto other = batch.with_rolled_text(half);
-          kl_other += distil(teacher_batch.with_rolled_text(half), model->forward(other), other.use_text) / accumulate;
+          const auto keep_other = distilled(other.use_text);
+          if (keep_other.any().item<bool>())
+            kl_other += distil(teacher_batch.with_rolled_text(half), model->forward(other), keep_other) / accumulate;
         }
       }
       // Equal micro-batches: the mean of their mean losses is the whole batch's. fp16 scales the loss.

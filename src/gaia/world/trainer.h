@@ -47,6 +47,9 @@ struct WorldTrainOptions {
   // the batch) to the teacher's: the prompt then may contradict the frames, which is where text guidance works and
   // where no drive of the data shows what should happen (the weather does not change within a drive).
   bool distill_other_text = false;
+  // Distil only on windows of procedural drives: a teacher that has never seen recorded footage keeps what it
+  // knows of the procedural world and holds real frames to nothing (a fine-tune that adds real drives).
+  bool distill_procedural_only = false;
   // Data-parallel ranks, gradient accumulation, sharded optimiser state. Rank 0 alone writes OUT, validates and
   // reports (on_step, on_note).
   train::Parallel parallel;
