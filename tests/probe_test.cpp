@@ -361,6 +361,58 @@ TEST(ProbeCli, RealismTellsRealFootageFromProcedural) {
   EXPECT_FALSE(fs::exists(d / "none" / "probe-realism.safetensors"));
 }
 
+// The scene probe on recorded footage: an episode without per-frame labels is labelled by its metadata (weather and
+// time of day, a manifest's columns), its light state and lead vehicle left out of the loss and the accuracies; one
+// whose metadata gives neither is one error line naming it.
+TEST(ProbeCli, SceneProbeLearnsRecordedFootageFromItsMetadata) {
+  test::TempDir d;
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  auto r = test::run_gaia("synth --episodes 4 --seconds 2 --size 32x64 --seed 9 --out " + q(d / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  // Two drives become recorded footage: no per-frame labels, a camera's source; their metadata keeps the scene's
+  // weather and time of day, as a manifest's columns give them.
+  auto recorded = [&](const std::string& id, const std::function<void(nlohmann::json&)>& edit = {}) {
+    const fs::path e = d / "ds" / "episodes" / id;
+    fs::remove(e / "labels.jsonl");
+    auto j = nlohmann::json::parse(read_file(e / "episode.json"));
+    j["source"] = "dashcam.mp4";
+    if (edit) edit(j);
+    write_file_atomic(e / "episode.json", j.dump(2));
+  };
+  recorded("synth-s9-e00000");
+  recorded("synth-s9-e00001");
+  r = test::run_gaia("data split " + q(d / "ds") + " --hold-out synth-s9-e00000" + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 60 --batch-size 16 --val-every 60 --out " +
+                     q(d / "scene"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(d / "scene" / "probe-scene.safetensors") + tiny +
+                     " --examples 16");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  // Only the recorded drive is held out: weather and time of day are scored, light and lead have no label to score.
+  EXPECT_TRUE(j["light_state_accuracy"].is_null()) << j;
+  EXPECT_TRUE(j["lead_close_accuracy"].is_null()) << j;
+  EXPECT_EQ(j["examples"].get<int>(), 16);
+  for (const char* k : {"weather_accuracy", "time_of_day_accuracy"}) {  // a share of the 16 labelled frames
+    const double a = j[k].get<double>();
+    EXPECT_GE(a, 0.0) << k;
+    EXPECT_LE(a, 1.0) << k;
+    EXPECT_NEAR(a * 16, std::round(a * 16), 1e-9) << k;
+  }
+
+  recorded("synth-s9-e00002", [](nlohmann::json& j) {
+    j["weather"] = "";
+    j["time_of_day"] = "twilight";
+  });
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --steps 2 --out " + q(d / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find("synth-s9-e00002: no labels.jsonl, and its metadata gives no weather or time_of_day"),
+            std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "bad" / "probe-scene.safetensors"));
+}
+
 // The realism probe's augmentation: shape and range kept, the same draws for the same seed, and each example changed
 // on its own (a grey example beside a coloured one).
 TEST(Probe, RealismAugmentationIsSeededAndStaysInRange) {

@@ -641,6 +641,134 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_FALSE(fs::exists(p.dir / "bad" / "eval.json"));
 }
 
+// gaia eval on recorded footage: --prompt-footage real takes its prompts from recorded held-out episodes only, futures
+// report what a realism probe reads of them beside the held-out frames, and strongly steered rollouts are read back
+// by the dynamics probe and by the generated video's own ego-motion. Procedural-only data, a replay of recorded
+// prompts, a probe of another kind and an unknown footage are each one error line.
+TEST(EvalCli, RealPromptsAreReadForRealismAndEgoMotion) {
+  auto& p = Pipeline::get();
+  const fs::path models = test::source_dir() / "models";
+  // The same drives as recorded footage (only their source differs): every token episode; half the frame episodes,
+  // on which a realism probe is trained two steps (its numbers are not the point here, their bookkeeping is).
+  const fs::path tokens = p.dir / "recorded-all-tokens", frames = p.dir / "half-recorded-ds";
+  for (const auto& [from, to] : {std::pair{p.tokens, tokens}, std::pair{p.ds, frames}}) {
+    fs::remove_all(to);
+    fs::copy(from, to, fs::copy_options::recursive);
+  }
+  std::vector<std::string> real_ids, synth_ids;
+  for (auto& e : fs::directory_iterator(tokens / "episodes")) {
+    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    j["source"] = "dashcam.mp4";
+    j["time_of_day"] = "day";  // text control continues recorded daytime drives
+    write_file_atomic(e.path() / "episode.json", j.dump(2));
+  }
+  int i = 0;
+  for (auto& e : fs::directory_iterator(frames / "episodes")) {
+    if (i++ % 2) {
+      synth_ids.push_back(e.path().filename().string());
+      continue;
+    }
+    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    j["source"] = "dashcam.mp4";
+    write_file_atomic(e.path() / "episode.json", j.dump(2));
+    real_ids.push_back(e.path().filename().string());
+  }
+  fs::remove(frames / "split.json");
+  auto r = test::run_gaia("data split " + q(frames) + " --hold-out " + real_ids[0] + " --hold-out " + synth_ids[0] + p.tiny());
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe train realism " + q(frames) + p.tiny() + " --steps 2 --batch-size 4 --out " + q(p.dir / "realism"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fs::path realism = p.dir / "realism" / "probe-realism.safetensors";
+
+  const int64_t K = probe::load_probe(models / "probe-dynamics.safetensors", torch::kCPU)->frames;
+  const std::string base = "eval " + q(tokens) + " --world " + q(p.trained) + " --tokenizer " +
+                           q(p.tok / "tokenizer.safetensors") + " --dynamics-probe " +
+                           q(models / "probe-dynamics.safetensors") + " --scene-probe " +
+                           q(models / "probe-scene.safetensors") + p.tiny() + " --prompts 2 --prompt-frames 2 --frames " +
+                           std::to_string(K - 1) + " --prompt-footage real";
+  r = test::run_gaia(base + " --only futures --futures 2 --realism-probe " + q(realism) + " --out " + q(p.dir / "eval-real"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(read_file(p.dir / "eval-real" / "eval.json"));
+  EXPECT_EQ(j["prompt_footage"], "real");
+  const auto& re = j["futures"]["realism"];
+  EXPECT_EQ(re["generated_frames"].get<int64_t>(), 2 * 2 * (K - 1));  // prompts x futures x frames
+  EXPECT_GE(re["held_out_frames"].get<int64_t>(), 1);
+  for (const char* k : {"generated_read_real", "held_out_read_real", "generated_mean_p_real", "held_out_mean_p_real"}) {
+    EXPECT_GE(re[k].get<double>(), 0.0) << k;
+    EXPECT_LE(re[k].get<double>(), 1.0) << k;
+  }
+
+  r = test::run_gaia(base + " --only action --out " + q(p.dir / "eval-real-action"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto a = nlohmann::json::parse(read_file(p.dir / "eval-real-action" / "eval.json"))["action_control"];
+  EXPECT_EQ(a["strong_steering"]["rollouts"].get<int>(), 2 * 2);  // strong-left and strong-right from each prompt
+  for (const char* k : {"probe_sign_accuracy", "ego_motion_sign_accuracy", "ego_motion_read"}) {
+    EXPECT_GE(a["strong_steering"][k].get<double>(), 0.0) << k;
+    EXPECT_LE(a["strong_steering"][k].get<double>(), 1.0) << k;
+  }
+  const auto yaw = a["ego_motion"]["yaw_rate_by_rollout"];
+  ASSERT_EQ(yaw.size(), size_t(a["rollouts"].get<int>()));
+  int read = 0;
+  for (const auto& y : yaw) read += y.is_number() && std::isfinite(y.get<double>());
+  EXPECT_EQ(a["ego_motion"]["rollouts_read"].get<int>(), read);
+
+  // Text control from real prompts: held-out recorded daytime drives continued under weather and time-of-day
+  // prompts (no traffic lights: recorded drives have none labelled); the generated frames alone are read.
+  r = test::run_gaia(base + " --only text --futures 2 --text-frames 1 --scales 0,2 --out " + q(p.dir / "eval-real-text"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto t = nlohmann::json::parse(read_file(p.dir / "eval-real-text" / "eval.json"))["text_control"];
+  EXPECT_EQ(t["prompt_frames"].get<int>(), 2);
+  EXPECT_EQ(t["targets"].get<int>(), 7);  // 4 weathers, 3 times of day
+  ASSERT_EQ(t["prompt_episodes"].size(), 2u);
+  for (const auto& row : t["runs"]) {
+    EXPECT_FALSE(row.contains("light")) << row.dump();
+    EXPECT_EQ(row["per_target"].size(), 7u) << row.dump();
+    for (const char* k : {"weather", "time_of_day"}) {
+      EXPECT_GE(row[k].get<double>(), 0.0) << k;
+      EXPECT_LE(row[k].get<double>(), 1.0) << k;
+    }
+  }
+
+  // world eval --footage: the held-out recorded episodes scored, the same windows as with any footage; none in a
+  // dataset of procedural drives only.
+  auto world_eval = [&](const fs::path& t, const std::string& footage) {
+    return test::run_gaia("world eval " + q(t) + " --world " + q(p.trained) + p.tiny() +
+                          " --max-windows 2 --sweep-windows 1 --footage " + footage);
+  };
+  r = world_eval(tokens, "real");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto we = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(we["footage"], "real");
+  EXPECT_GE(we["episodes"].get<int>(), 1);
+  r = world_eval(tokens, "any");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto any = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(any["episodes"], we["episodes"]);
+  EXPECT_EQ(any["bits_per_token"]["world_model"], we["bits_per_token"]["world_model"]);
+  r = world_eval(p.tokens, "real");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("no held-out real window"), std::string::npos) << r.output;
+
+  // Bad inputs: one line naming what is wrong, nothing written.
+  r = test::run_gaia(base + " " + q(p.ds) + " --only action --out " + q(p.dir / "bad-real"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("give --prompt-footage procedural"), std::string::npos) << r.output;
+  r = test::run_gaia("eval " + q(p.tokens) + " --world " + q(p.trained) + " --tokenizer " + q(p.tok / "tokenizer.safetensors") +
+                     " --dynamics-probe " + q(models / "probe-dynamics.safetensors") + " --scene-probe " +
+                     q(models / "probe-scene.safetensors") + p.tiny() + " --only futures --prompt-footage real --out " +
+                     q(p.dir / "bad-real"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("no held-out real episode"), std::string::npos) << r.output;
+  r = test::run_gaia(base + " --only futures --realism-probe " + q(models / "probe-scene.safetensors") + " --out " +
+                     q(p.dir / "bad-real"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("not a realism probe"), std::string::npos) << r.output;
+  r = test::run_gaia(base + " --only futures --prompt-footage sideways --out " + q(p.dir / "bad-real"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--prompt-footage"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "bad-real" / "eval.json"));
+}
+
 // gaia sim --stdio: a session made from an episode of the token dataset and stepped with `generate`'s command gives
 // `generate`'s tokens (same seed, guidance and sampling from the weights); frames come back as PNG through the
 // tokenizer; every line gets one answer line, bad ones a 4xx, and the session keeps serving.

@@ -16,7 +16,7 @@ namespace {
 struct EvalFlags {
   std::string tokens, world, tokenizer, dataset, dynamics_probe = "models/probe-dynamics.safetensors",
       scene_probe = "models/probe-scene.safetensors", only = "action,text,futures,long", world_eval,
-      action_negative = "mirror", commands = "default", t5;
+      action_negative = "mirror", commands = "default", t5, prompt_footage = "any", realism_probe;
   int prompts = 8, prompt_frames = 3, frames = 5, futures = 4, text_frames = 4, top_k = -1;
   int long_rollouts = emerging::RolloutEvalOptions{}.long_rollouts;
   double action_guidance = 0, long_seconds = 60, window_seconds = 10;
@@ -41,6 +41,14 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--dynamics-probe", e->dynamics_probe, "dynamics probe weights (default: the shipped one)");
   cmd->add_option("--scene-probe", e->scene_probe, "scene probe weights (default: the shipped one)");
   cmd->add_option("--only", e->only, "comma-separated parts: action, text, futures, long");
+  cmd->add_option("--prompt-footage", e->prompt_footage,
+                  "which held-out episodes give the video prompts (and the real reference): any (default), real "
+                  "(recorded footage) or procedural; a dataset of both measures each apart. With real, text control "
+                  "continues held-out recorded daytime drives under its prompts instead of generating from scratch")
+      ->check(CLI::IsMember({"any", "real", "procedural"}));
+  cmd->add_option("--realism-probe", e->realism_probe,
+                  "realism probe weights (probe-realism.safetensors): futures also report the share of generated "
+                  "frames read as real, beside the held-out frames' own share");
   cmd->add_option("--prompts", e->prompts, "held-out video prompts")->check(number_in({1, 1e6}));
   cmd->add_option("--prompt-frames", e->prompt_frames, "prompt frames per rollout")->check(number_in({1, 1e6}));
   cmd->add_option("--frames", e->frames, "generated frames per rollout (action control, futures)")->check(number_in({1, 1e6}));
@@ -85,6 +93,7 @@ void register_eval(CLI::App& app) {
       fail("--long-rollouts must be at least 1, got {}", e->long_rollouts);
     auto dev = parse_device(run.run.device);
     auto m = emerging::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev, e->t5);
+    if (!e->realism_probe.empty()) emerging::load_realism_probe(m, e->realism_probe);
     apply_sampling_sets(*flags, "world", kWorldSamplingKeys, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())
@@ -101,6 +110,7 @@ void register_eval(CLI::App& app) {
     sampling.guide_actions_within_top_k = m.info.config.world.guide_actions_within_top_k;
     o.header = {{"world", e->world},        {"tokenizer", e->tokenizer},
                 {"tokens", e->tokens},      {"top_k", sampling.top_k},
+                {"prompt_footage", e->prompt_footage},
                 {"temperature", sampling.temperature},
                 {"guide_actions_within_top_k", sampling.guide_actions_within_top_k}};
     o.action.prompts = e->prompts;
@@ -111,11 +121,13 @@ void register_eval(CLI::App& app) {
     o.action.mirror_negative = e->action_negative == "mirror";
     o.action.commands = e->commands;
     o.action.seed = uint64_t(run.run.seed);
+    o.action.footage = o.rollouts.footage = world::parse_footage(e->prompt_footage);
     o.text.futures = e->futures;
     o.text.frames = e->text_frames;
     o.text.scales = e->scales;
     o.text.sampling = sampling;
     o.text.seed = uint64_t(run.run.seed);
+    if (o.action.footage == world::Footage::kReal) o.text.real_prompt_frames = e->prompt_frames;
     o.rollouts.prompts = e->prompts;
     o.rollouts.prompt_frames = e->prompt_frames;
     o.rollouts.frames = e->frames;

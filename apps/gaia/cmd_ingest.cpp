@@ -1,5 +1,6 @@
 // gaia ingest VIDEO|KITTI_DRIVE [--signals CSV | --gps TRACK] [--meta key=value ...] [--allow-partial] --out DATASET
 // gaia ingest DIR --manifest clips.csv [--motion video] --out DATASET: every clip of a folder, resumable
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 
@@ -44,14 +45,19 @@ void ingest_manifest(const fs::path& dir, const fs::path& manifest_file, const f
   if (base.fps > 0) fail("--fps is for one clip; a manifest states each clip's rate in its 'fps' column");
   int done = 0, skipped = 0;
   std::vector<std::string> failed;
-  ProgressBar bar(int64_t(m.rows.size()), "ingest");
+  auto ingested = [&](const data::ManifestRow& row) {
+    return !base.overwrite && fs::exists(out / "episodes" / row.id / "episode.json");
+  };
+  const int64_t already = std::count_if(m.rows.begin(), m.rows.end(), ingested);
+  // A resumed run's bar starts at the clips already there: its rate and ETA are of this run's clips.
+  ProgressBar bar(int64_t(m.rows.size()), "ingest", true, already);
   for (size_t i = 0; i < m.rows.size(); ++i) {
     const data::ManifestRow& row = m.rows[i];
-    bar.update(int64_t(i), row.id);
-    if (!base.overwrite && fs::exists(out / "episodes" / row.id / "episode.json")) {
+    if (ingested(row)) {
       ++skipped;
       continue;
     }
+    bar.update(already + done + int64_t(failed.size()), row.id);
     try {
       if (!fs::exists(row.path))
         fail("{}:{} (clip {}): column 'file': {} does not exist", m.file.string(), row.line, row.file,

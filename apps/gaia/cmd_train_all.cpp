@@ -379,7 +379,10 @@ void register_train_all(CLI::App& app) {
         for (size_t e = 0; e < mine.size() && !recorded; ++e) recorded = !mine.meta(e).is_procedural();
       }
       if (lane > 0 && recorded)
+        // Half of each batch read through the tokenizer, as gaia eval reads generated frames: decoding alone must
+        // not read as procedural.
         stages.push_back({"probe-realism", with({"probe", "train", "realism", data, "--steps", std::to_string(st->probe_realism),
+                                                 "--tokenizer", tk, "--decoded-share", "0.5",
                                                  "--out", (out / "probe-realism").string()}), realism});
       if (!*skip_eval)
         stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),

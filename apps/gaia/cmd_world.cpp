@@ -150,6 +150,10 @@ void register_world(CLI::App& app) {
                     "tokens (1 = argmax, 0 = the whole distribution; default: 1, world.top_k, 0)")
         ->delimiter(',');
     cmd->add_option("--sweep-windows", *sweep_windows, "held-out windows whose last frame each strategy generates");
+    auto footage = std::make_shared<std::string>("any");
+    cmd->add_option("--footage", *footage,
+                    "which held-out episodes are scored: any (default), real (recorded footage) or procedural")
+        ->check(CLI::IsMember({"any", "real", "procedural"}));
     add_shared_flags(cmd, flags.get(), "output directory (eval.json, perplexity_by_position.svg)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);
@@ -162,6 +166,7 @@ void register_world(CLI::App& app) {
       eo.max_windows = *max_windows;
       eo.top_k_sweep = *sweep;
       eo.sweep_windows = *sweep_windows;
+      eo.footage = world::parse_footage(*footage);
       eo.name = *tokens;
       eo.weights = *weights;
       std::unique_ptr<ProgressBar> bar;

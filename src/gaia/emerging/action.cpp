@@ -1,10 +1,12 @@
 #include "gaia/emerging/action.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/ranges.h>
 
 #include "gaia/core/error.h"
+#include "gaia/data/motion.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/eval/svg_plot.h"
 #include "gaia/synth/synth.h"
@@ -47,6 +49,29 @@ Readback read_rows(Models& m, const std::vector<std::vector<cv::Mat>>& frames, i
     for (int64_t j = 0; j < y.size(0); ++j) r.pair_read.push_back(y[j][1].item<double>());
   }
   return r;
+}
+
+// A steering command this strong (1/m) or more is one the read-backs must get the side of (strong-left / -right).
+constexpr double kStrongSteer = 0.02;
+
+// The generated video's own visual odometry (data/motion.h), a read-back any driving video model's output can be
+// given: the median yaw rate (rad/s, + = left) of each row's frames from `from` on, NaN where it finds no motion.
+// At the tokenizer's frame size the road plane's scale is coarse, so only the yaw rate (no scale needed) is used.
+std::vector<double> ego_motion_yaw_rates(const std::vector<std::vector<cv::Mat>>& rows, int64_t from, double fps) {
+  std::vector<double> out;
+  for (const auto& row : rows) {
+    data::CameraIntrinsics cam;
+    cam.width = row.at(size_t(from)).cols;
+    cam.height = row.at(size_t(from)).rows;
+    data::MotionEstimator est(cam, data::MotionOptions{});
+    for (size_t k = size_t(from); k < row.size(); ++k) est.add(row[k], double(k - size_t(from)) / fps);
+    std::vector<double> w;
+    for (double y : est.finish().yaw_rate)
+      if (std::isfinite(y)) w.push_back(y);
+    std::sort(w.begin(), w.end());
+    out.push_back(w.empty() ? std::nan("") : w[w.size() / 2]);
+  }
+  return out;
 }
 
 double sign_accuracy(const std::vector<double>& cmd, const std::vector<double>& read) {
@@ -123,7 +148,12 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
          m.dynamics->frames, m.dynamics->frames - 1, F);
   const auto cmds = action_commands(o.commands);
   const int64_t C = int64_t(cmds.size()), R = int64_t(o.prompts) * C;
-  auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed);
+  auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed, o.footage);
+  if (raw)
+    for (size_t e : pr.episodes)
+      if (!ds.meta(e).is_procedural())
+        fail("{}: action control's counterfactual replay needs procedural prompts, and held-out episode {} is recorded "
+             "footage (give --prompt-footage procedural, or leave out EPISODES)", ds.path().string(), ds.ids()[e]);
 
   // Row r = prompt r / C under command r % C. The command takes over from the last prompt step's action (the one
   // that leads into the first generated frame), so all F generated frames follow it.
@@ -202,6 +232,33 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   }
   j["conditioned"]["steering_sign_accuracy_per_frame"] = sign_accuracy(pair_cmd, rw.pair_read);  // per probe window
   j["probe_frames"] = m.dynamics->frames;
+
+  // Strongly steered rollouts, read two ways: the dynamics probe and the generated video's own ego-motion.
+  const double fps = ds.rate_hz() > 0 ? ds.rate_hz() : 6.25;
+  const auto yaw = ego_motion_yaw_rates(fw, P - 1, fps);
+  std::vector<double> strong_cmd, strong_probe, strong_ego;
+  int ego_read = 0;
+  for (int64_t r = 0; r < R; ++r)
+    if (std::abs(cmd_curv[size_t(r)]) >= kStrongSteer) {
+      strong_cmd.push_back(cmd_curv[size_t(r)]);
+      strong_probe.push_back(rw.curvature[size_t(r)]);
+      ego_read += std::isfinite(yaw[size_t(r)]);
+      strong_ego.push_back(std::isfinite(yaw[size_t(r)]) ? yaw[size_t(r)] : -cmd_curv[size_t(r)]);  // unread = wrong
+    }
+  std::vector<double> all_yaw_cmd, all_yaw;
+  for (int64_t r = 0; r < R; ++r)
+    if (std::isfinite(yaw[size_t(r)])) {
+      all_yaw_cmd.push_back(cmd_curv[size_t(r)]);
+      all_yaw.push_back(yaw[size_t(r)]);
+    }
+  j["strong_steering"] = {{"min_curvature", kStrongSteer},
+                          {"rollouts", strong_cmd.size()},
+                          {"probe_sign_accuracy", sign_accuracy(strong_cmd, strong_probe)},
+                          {"ego_motion_sign_accuracy", sign_accuracy(strong_cmd, strong_ego)},
+                          {"ego_motion_read", strong_cmd.empty() ? 0.0 : double(ego_read) / double(strong_cmd.size())}};
+  j["ego_motion"] = {{"rollouts_read", all_yaw.size()},
+                     {"curvature_yaw_rate_spearman", all_yaw.size() > 2 ? eval::spearman(all_yaw_cmd, all_yaw) : std::nan("")},
+                     {"yaw_rate_by_rollout", yaw}};
 
   // Counterfactual replay of the procedural world under the same commands: ground truth for every rollout.
   std::vector<std::vector<cv::Mat>> truth(static_cast<size_t>(R));
@@ -331,7 +388,6 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
       truth_rows.push_back(t);
     }
   }
-  const double fps = ds.rate_hz() > 0 ? ds.rate_hz() : 6.25;
   out.gif("videos/action_generated.gif", tile(gen_rows, labels), fps / 2);
   nlohmann::json videos = nlohmann::json::array();
   videos.push_back({{"caption", "one held-out prompt, then each command (world model, decoded by the tokenizer)"},

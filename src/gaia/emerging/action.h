@@ -41,6 +41,7 @@ struct ActionEvalOptions {
   // either with no command; a straight command at the kept speed is not guided at all.
   bool mirror_negative = true;
   std::string commands = "default";  // action_commands(): "default" or "sweep"
+  Footage footage = Footage::kAny;   // which held-out episodes give the prompts
   uint64_t seed = 0;
 };
 

@@ -29,6 +29,11 @@ Models load_models(const fs::path& world, const fs::path& tokenizer, const fs::p
   return m;
 }
 
+void load_realism_probe(Models& m, const fs::path& path) {
+  m.realism = probe::load_probe(path, m.dev);
+  if (m.realism->kind != probe::ProbeKind::kRealism) fail("{}: not a realism probe", path.string());
+}
+
 text::TextEncoder& Models::text_encoder() const {
   if (!text) world::prompt_encoder(info, world_path.string(), {});  // fails, saying which flag to give
   if (!text->embeds() && info.vocab.size() == 0)
@@ -50,16 +55,18 @@ torch::Tensor episode_tokens(const world::TokenDataset& ds, size_t e) {
       .to(torch::kLong);
 }
 
-Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed) {
+Prompts held_out_prompts(const world::TokenDataset& ds, int count, int64_t frames, int64_t need, uint64_t seed,
+                         Footage footage, const std::function<bool(size_t)>& keep) {
   auto split = ds.split(0.1, seed);
   auto ids = split.held_out();
   const int64_t skip = int64_t(std::lround(ds.rate_hz() > 0 ? ds.rate_hz() : 6.25));  // the first second
   std::vector<std::pair<size_t, int64_t>> pool;  // (episode, start): every held-out window, then spread
   for (size_t e : ds.indices(ids))
-    for (int64_t s = skip; s + need <= ds.steps(e); s += frames) pool.push_back({e, s});
+    if (footage_matches(ds, e, footage) && (!keep || keep(e)))
+      for (int64_t s = skip; s + need <= ds.steps(e); s += frames) pool.push_back({e, s});
   if (pool.empty())
-    fail("{}: no held-out episode has {} steps for a prompt (validation split of the token dataset)",
-         ds.path().string(), need + skip);
+    fail("{}: no held-out {}episode has {} steps for a prompt (validation split of the token dataset)",
+         ds.path().string(), footage == Footage::kAny ? "" : to_string(footage) + " ", need + skip);
   Prompts p;
   const int64_t n = ds.tokens_per_step();
   p.tokens = torch::zeros({count, frames, n}, torch::kLong);
@@ -128,6 +135,13 @@ torch::Tensor read_scene(Models& m, const std::vector<cv::Mat>& frames, torch::T
   std::vector<torch::Tensor> ids;
   for (auto& head : probe::split_scene_logits(logits)) ids.push_back(head.argmax(1));
   return torch::stack(ids, 1);
+}
+
+torch::Tensor read_realism(Models& m, const std::vector<cv::Mat>& frames) {
+  if (!m.realism) fail("realism read-back needs a realism probe (--realism-probe)");
+  std::vector<torch::Tensor> in;
+  for (const auto& f : frames) in.push_back(probe::probe_input({f}));
+  return torch::sigmoid(run_probe(m.realism, in, m.dev, nullptr).select(1, 0).to(torch::kFloat64));
 }
 
 std::vector<cv::Mat> tile(const std::vector<std::vector<cv::Mat>>& rows, const std::vector<std::string>& labels) {

@@ -29,15 +29,18 @@ namespace {
 // their token windows: the reference for FD-probe and for the long-rollout statistics.
 struct RealReference {
   torch::Tensor features;              // [N, F] scene-probe features of decoded real frames
+  std::vector<cv::Mat> frames;         // those frames, decoded
   std::vector<torch::Tensor> windows;  // token windows [W, n] of real episodes
 };
 
-RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t window, int max_frames, uint64_t seed) {
+RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t window, int max_frames, uint64_t seed,
+                             Footage footage) {
   auto split = ds.split(0.1, seed);
   auto ids = split.held_out();
   RealReference r;
   std::vector<torch::Tensor> picks;
   for (size_t e : ds.indices(ids)) {
+    if (!footage_matches(ds, e, footage)) continue;
     auto all = episode_tokens(ds, e);
     for (int64_t s = 0; s + window <= ds.steps(e); s += window) r.windows.push_back(all.narrow(0, s, window));
     for (int64_t k = 0; k < ds.steps(e); k += 5) picks.push_back(all[k]);
@@ -46,8 +49,8 @@ RealReference real_reference(Models& m, const world::TokenDataset& ds, int64_t w
   std::vector<torch::Tensor> chosen;
   for (int i = 0; i < max_frames && i < int(picks.size()); ++i)
     chosen.push_back(picks[size_t(i) * picks.size() / size_t(std::min<int>(max_frames, int(picks.size())))]);
-  auto frames = decode(m, torch::stack(chosen).unsqueeze(0))[0];
-  read_scene(m, frames, &r.features);
+  r.frames = decode(m, torch::stack(chosen).unsqueeze(0))[0];
+  read_scene(m, r.frames, &r.features);
   return r;
 }
 
@@ -62,7 +65,7 @@ torch::Tensor scene_features(Models& m, const std::vector<cv::Mat>& frames) {
 nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const RolloutEvalOptions& o, Output& out) {
   const int64_t P = o.prompt_frames, F = o.frames, N = o.futures;
   if (N < 2) fail("diversity needs at least two futures per prompt");
-  auto pr = held_out_prompts(ds, o.prompts, P, P + F, m.info.config.run.seed);
+  auto pr = held_out_prompts(ds, o.prompts, P, P + F, m.info.config.run.seed, o.footage);
   world::RolloutPrompt p;
   p.tokens = pr.tokens.repeat_interleave(N, 0);
   p.actions = torch::full({o.prompts * N, P + F, 2}, std::nan(""));  // the prompt's recorded actions, then none
@@ -83,13 +86,24 @@ nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const
   auto frames = decode(m, r.tokens);
   std::vector<cv::Mat> generated;
   for (auto& row : frames) generated.insert(generated.end(), row.begin() + P, row.end());
-  auto real = real_reference(m, ds, 1, 2 * int(generated.size()), m.info.config.run.seed);
+  auto real = real_reference(m, ds, 1, 2 * int(generated.size()), m.info.config.run.seed, o.footage);
   const int64_t half = real.features.size(0) / 2;
   nlohmann::json j = {
       {"prompts", o.prompts}, {"futures", N}, {"frames", F},
       {"mean_pairwise_token_distance", dist / pairs},
       {"fd_probe_to_real", probe::frechet_distance(scene_features(m, generated), real.features)},
       {"fd_probe_real_vs_real", probe::frechet_distance(real.features.slice(0, 0, half), real.features.slice(0, half))}};
+  if (m.realism) {
+    // Whether futures stay real: the share of generated frames the realism probe reads as camera footage, beside
+    // the share of the held-out frames themselves (through the same decoder): its ceiling.
+    auto gen_p = read_realism(m, generated), real_p = read_realism(m, real.frames);
+    j["realism"] = {{"generated_read_real", (gen_p > 0.5).to(torch::kFloat64).mean().item<double>()},
+                    {"held_out_read_real", (real_p > 0.5).to(torch::kFloat64).mean().item<double>()},
+                    {"generated_mean_p_real", gen_p.mean().item<double>()},
+                    {"held_out_mean_p_real", real_p.mean().item<double>()},
+                    {"generated_frames", gen_p.size(0)},
+                    {"held_out_frames", real_p.size(0)}};
+  }
   std::vector<std::vector<cv::Mat>> rows(frames.begin(), frames.begin() + std::min<int64_t>(N, 3));
   std::vector<std::string> labels;
   for (size_t i = 0; i < rows.size(); ++i) labels.push_back(fmt::format("future {}", i + 1));
@@ -112,7 +126,7 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   const int64_t W = int64_t(std::lround(o.window_seconds * rate)), R = o.long_rollouts;
   if (F < W) fail("--long-seconds {} is shorter than one {} s window", o.long_seconds, o.window_seconds);
   if (R < 1) fail("--long-rollouts must be at least 1, got {}", R);
-  auto pr = held_out_prompts(ds, int(R), P, P, m.info.config.run.seed);  // spread over the held-out drives
+  auto pr = held_out_prompts(ds, int(R), P, P, m.info.config.run.seed, o.footage);  // spread over the held-out drives
   world::RolloutPrompt p;
   p.tokens = pr.tokens;  // [R, P, n]: one prompt per rollout
   world::RolloutOptions ro;
@@ -125,7 +139,7 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   bar.finish();
   auto gen = r.tokens.narrow(1, P, F);  // [R, F, n]
   auto frames = decode(m, gen);         // [R][F]
-  auto real = real_reference(m, ds, W, 256, m.info.config.run.seed);
+  auto real = real_reference(m, ds, W, 256, m.info.config.run.seed, o.footage);
   if (real.windows.empty()) fail("{}: no held-out episode is {} s long (the statistics window)", ds.path().string(), o.window_seconds);
   auto mean_of = [](const std::vector<double>& v) {
     double s = 0;

@@ -19,6 +19,7 @@ struct RolloutEvalOptions {
   double window_seconds = 10;
   int long_rollouts = 8;        // long rollouts, each from another held-out prompt, batched
   world::SamplingOptions sampling;
+  Footage footage = Footage::kAny;  // which held-out episodes give the prompts and the real reference
   uint64_t seed = 0;
 };
 

@@ -1,5 +1,6 @@
 #include "gaia/emerging/text.h"
 
+#include <cmath>
 #include <map>
 
 #include "gaia/core/error.h"
@@ -78,7 +79,10 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
 }
 
 nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real) {
-  const auto targets = text_targets();
+  const int64_t P = o.real_prompt_frames;
+  std::vector<TextTarget> targets;
+  for (const auto& t : text_targets())
+    if (P == 0 || t.attribute < 2) targets.push_back(t);  // a recorded drive's traffic lights are not labelled
   const int64_t G = int64_t(targets.size()), N = G * o.futures, F = o.frames, M = m.info.config.world.text_tokens;
   std::vector<std::string> prompts, negatives;
   for (int64_t r = 0; r < N; ++r) {
@@ -86,8 +90,22 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
     negatives.push_back(targets[size_t(r / o.futures)].negative);
   }
   world::RolloutPrompt p, with_negative;
-  world::set_future_texts(p, m.text_encoder(), prompts, F, M);
-  world::set_future_texts(with_negative, m.text_encoder(), negatives, F, M, true);
+  nlohmann::json j;
+  if (P > 0) {
+    // Row r: target r / futures from held-out daytime prompt r % futures, with its recorded actions, then none.
+    if (!real) fail("text control from real prompts needs the token dataset");
+    auto pr = held_out_prompts(*real, o.futures, P, P + F, m.info.config.run.seed, Footage::kReal,
+                               [&](size_t e) { return real->meta(e).time_of_day == "day"; });
+    p.tokens = pr.tokens.repeat({G, 1, 1});
+    p.actions = torch::full({N, P + F, 2}, std::nan(""));
+    p.actions.narrow(1, 0, P).copy_(pr.actions.repeat({G, 1, 1}));
+    j["prompt_frames"] = P;
+    j["prompt_episodes"] = nlohmann::json::array();
+    for (size_t e : pr.episodes) j["prompt_episodes"].push_back(real->ids()[e]);
+  }
+  // The text holds from the first step: a prompt shown with its own words would only be continued.
+  world::set_future_texts(p, m.text_encoder(), prompts, P + F, M);
+  world::set_future_texts(with_negative, m.text_encoder(), negatives, P + F, M, true);
   std::vector<Run> runs;
   for (double s : o.scales) runs.push_back({fmt::format("s = {}", s), {s}, false});
   const double top = o.scales.empty() ? 2.0 : o.scales.back();
@@ -96,12 +114,13 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
                                 1, int(F)};
   runs.push_back({fmt::format("s = {}, linear over tokens, cosine over frames", top), sched, false});
 
-  nlohmann::json j;
   j["targets"] = G;
   j["futures"] = o.futures;
   j["frames"] = F;
   std::vector<eval::Series> curves(3);
-  for (int a = 0; a < 3; ++a) curves[size_t(a)].name = kAttributes[a];
+  const int attributes = P > 0 ? 2 : 3;
+  curves.resize(size_t(attributes));
+  for (int a = 0; a < attributes; ++a) curves[size_t(a)].name = kAttributes[a];
   std::vector<std::vector<cv::Mat>> best_rows;
   std::vector<std::string> best_labels;
   nlohmann::json table = nlohmann::json::array();
@@ -120,7 +139,7 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
     ro.guidance.total_frames = int(F);
     ro.seed = o.seed + 17 * ri;
     auto r = world::rollout(m.world, q, ro);
-    auto frames = decode(m, r.tokens);
+    auto frames = decode(m, r.tokens.narrow(1, P, F));  // the generated frames only
     std::vector<double> hit(3, 0), total(3, 0);
     nlohmann::json per = nlohmann::json::object(), read_as = nlohmann::json::object();
     for (int64_t g = 0; g < G; ++g) {
@@ -143,6 +162,7 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
     }
     nlohmann::json row = {{"setting", run.name}, {"per_target", per}, {"read_as", read_as}};
     for (int a = 0; a < 3; ++a) {
+      if (total[size_t(a)] == 0) continue;  // not prompted (traffic lights on real prompts)
       row[kAttributes[a]] = hit[size_t(a)] / total[size_t(a)];
       if (ri < o.scales.size()) curves[size_t(a)].y.push_back(hit[size_t(a)] / total[size_t(a)]);
     }
@@ -159,7 +179,7 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
                                                       curves, "guidance scale s", "accuracy"));
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& r : table)
-    rows.push_back({r["setting"], r["weather"], r["time_of_day"], r["light"]});
+    rows.push_back({r["setting"], r["weather"], r["time_of_day"], r.value("light", nlohmann::json(nullptr))});
   if (real) {  // what the probe reads on real scenes of the prompted kinds: the most a prompt can score
     j["real_decoded"] =
         real_decoded_accuracy(m, *real, real->indices(real->split(0.1, m.info.config.run.seed).held_out()), 16);
@@ -180,9 +200,13 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
   out.gif("videos/text_prompts.gif", video, 3.0);
   out.sections.push_back(
       {{"title", "Text control"},
-       {"text", fmt::format("Scenes generated from a text prompt alone ({} prompts x {} futures x {} frames); the "
-                            "scene probe reads the prompted attribute back from every decoded frame.",
-                            G, o.futures, F)},
+       {"text", P > 0 ? fmt::format("Held-out recorded daytime drives ({} frames each) continued under a text prompt "
+                                    "({} prompts x {} futures x {} frames); the scene probe reads the prompted "
+                                    "attribute back from every generated frame.",
+                                    P, G, o.futures, F)
+                      : fmt::format("Scenes generated from a text prompt alone ({} prompts x {} futures x {} frames); "
+                                    "the scene probe reads the prompted attribute back from every decoded frame.",
+                                    G, o.futures, F)},
        {"videos", {{{"caption", fmt::format("one future per prompt at guidance s = {}", top)},
                     {"items", {{{"label", "text prompts"}, {"path", "videos/text_prompts.gif"}}}}}}},
        {"plots", {{{"caption", "accuracy of the prompted attribute vs guidance scale"},

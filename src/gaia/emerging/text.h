@@ -18,7 +18,10 @@ std::vector<TextTarget> text_targets();
 
 struct TextEvalOptions {
   int futures = 4;                                   // rollouts per target and setting
-  int frames = 4;                                    // generated from scratch
+  int frames = 4;                                    // generated (from scratch, or after a real prompt)
+  // > 0: each rollout starts from this many steps of a held-out recorded daytime drive of the token dataset, and
+  // only weather and time of day are prompted: text steering a real scene. 0: from scratch (the paper's Fig. 8).
+  int real_prompt_frames = 0;
   // Guidance scales s; the last one also runs with the negative prompt and with the schedules. The range reaches
   // past the scales where text control usually saturates, so the curve shows where it stops rising.
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0, 8.0};
@@ -33,7 +36,7 @@ struct TextEvalOptions {
 nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, const std::vector<size_t>& episodes,
                                      int frames_per_episode);
 
-// real: the token dataset whose held-out episodes give the ceiling above; nullptr skips it.
+// real: the token dataset whose held-out episodes give the ceiling above (and the real prompts); nullptr skips it.
 nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real = nullptr);
 
 }  // namespace gaia::emerging

@@ -21,6 +21,9 @@ namespace gaia::probe {
 
 namespace F = torch::nn::functional;
 
+// A scene label a frame does not have (recorded footage: light state, lead vehicle); cross-entropy's ignore index.
+constexpr int64_t kUnlabelled = -100;
+
 torch::Tensor probe_input(const std::vector<cv::Mat>& frames) {
   std::vector<torch::Tensor> xs;
   for (const auto& f : frames) {
@@ -95,6 +98,16 @@ torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Ep
   std::vector<int64_t> v;
   for (const auto& e : ex) {
     const auto& ep = *eps.at(e.episode);
+    if (!ep.has_labels() && !ep.meta().is_procedural()) {
+      // Recorded footage: the episode's weather and time of day (a manifest's columns) label every frame; its
+      // light state and lead vehicle are not known and stay out of the loss and the accuracies.
+      const int64_t w = class_index(weather_classes(), ep.meta().weather), t = class_index(time_classes(), ep.meta().time_of_day);
+      if (w < 0 && t < 0)
+        fail("{}: no labels.jsonl, and its metadata gives no weather or time_of_day the scene probe knows ('{}', '{}')",
+             ep.dir().string(), ep.meta().weather, ep.meta().time_of_day);
+      v.insert(v.end(), {w < 0 ? kUnlabelled : w, t < 0 ? kUnlabelled : t, kUnlabelled, kUnlabelled});
+      continue;
+    }
     if (!ep.has_labels()) fail("{}: no labels.jsonl (the scene probe trains on gaia synth data)", ep.dir().string());
     const auto& j = ep.labels(e.frame);
     auto cls = [&](const std::vector<std::string>& classes, const char* key) {
@@ -132,7 +145,11 @@ torch::Tensor loss_of(ProbeKind kind, const torch::Tensor& out, const torch::Ten
   if (kind == ProbeKind::kRealism) return F::binary_cross_entropy_with_logits(out, y);
   auto heads = split_scene_logits(out);
   torch::Tensor l = torch::zeros({}, out.options());
-  for (size_t k = 0; k < heads.size(); ++k) l = l + F::cross_entropy(heads[k], y.select(1, int64_t(k)));
+  for (size_t k = 0; k < heads.size(); ++k) {
+    auto yk = y.select(1, int64_t(k));
+    if (yk.ne(kUnlabelled).any().item<bool>())  // a batch of recorded frames only has no light labels
+      l = l + F::cross_entropy(heads[k], yk, F::CrossEntropyFuncOptions().ignore_index(kUnlabelled));
+  }
   return l;
 }
 
@@ -217,8 +234,12 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
   }
   auto heads = split_scene_logits(pred);
   const char* names[4] = {"weather_accuracy", "time_of_day_accuracy", "light_state_accuracy", "lead_close_accuracy"};
-  for (size_t k = 0; k < 4; ++k)
-    j[names[k]] = heads[k].argmax(1).eq(y.select(1, int64_t(k))).to(torch::kFloat64).mean().item<double>();
+  for (size_t k = 0; k < 4; ++k) {
+    auto yk = y.select(1, int64_t(k));
+    auto known = yk.ne(kUnlabelled);  // recorded frames have no light state or lead-vehicle label
+    const int64_t n = known.sum().item<int64_t>();
+    j[names[k]] = n ? heads[k].argmax(1).eq(yk).logical_and(known).sum().item<double>() / double(n) : std::nan("");
+  }
   return j;
 }
 

@@ -16,11 +16,13 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
   auto split = ds.split(0.1, info.config.run.seed);
   auto ids = split.held_out();
   if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
-  auto eps = ds.indices(ids);
+  auto eps = with_footage(ds, ds.indices(ids), o.footage);
   auto windows = validation_windows(ds, eps, info.config.world.context_steps, o.max_windows);
-  if (windows.empty()) fail("{}: no held-out window of {} steps to score", o.name, info.config.world.context_steps);
+  const std::string kind = o.footage == Footage::kAny ? "" : to_string(o.footage) + " ";
+  if (windows.empty()) fail("{}: no held-out {}window of {} steps to score", o.name, kind, info.config.world.context_steps);
   const TextSource text = text_source(info, ds);
-  nlohmann::json j = {{"tokens", o.name}, {"world", o.weights}, {"windows", windows.size()}};
+  nlohmann::json j = {{"tokens", o.name}, {"world", o.weights}, {"footage", to_string(o.footage)},
+                      {"episodes", eps.size()}, {"windows", windows.size()}};
   std::vector<int> ks = o.top_k_sweep.empty() ? std::vector<int>{1, info.config.world.top_k, 0} : o.top_k_sweep;
   for (int k : ks)
     if (k < 0 || k > info.K) fail("--top-k-sweep: k must be in [0, {}] (0 = the whole distribution), got {}", info.K, k);

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/core/fs.h"
+#include "gaia/world/footage.h"
 #include "gaia/world/io.h"
 #include "gaia/world/model.h"
 #include "gaia/world/token_dataset.h"
@@ -23,6 +24,7 @@ struct WorldEvalOptions {
                                     // empty = 1, world.top_k, 0
   size_t sweep_windows = 64;        // windows whose last frame each strategy draws
   std::string name, weights;        // recorded in the result: the token dataset and the weights file
+  Footage footage = Footage::kAny;  // which held-out episodes are scored: a dataset of both scores each apart
 };
 
 // Scores `model` on the held-out episodes of `ds` (every episode when none is held out, e.g. a bare .npy) and
