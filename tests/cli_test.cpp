@@ -7,6 +7,7 @@
 #include "test_util.h"
 
 #include <algorithm>
+#include <cstring>
 #include <sstream>
 
 using namespace gaia;
@@ -154,7 +155,8 @@ TEST(Cli, ConvertToHalf) {
   auto src = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
   auto r = test::run_gaia("convert '" + src.string() + "' --out '" + (d / "x.safetensors").string() + "'");
   EXPECT_NE(r.status, 0);
-  EXPECT_NE(r.output.find("say --half, --set KEY=VALUE, --interpolate-from FROM or a combination"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("say --half, --set KEY=VALUE, --interpolate-from FROM, --terms TEXT or a combination"),
+            std::string::npos) << r.output;
   r = test::run_gaia("convert '" + src.string() + "' --half --out '" + (d / "half.safetensors").string() + "'");
   ASSERT_EQ(r.status, 0) << r.output;
   // The output path is used exactly as given (a CLI11 required-flag bug once corrupted it).
@@ -176,6 +178,20 @@ TEST(Cli, ConvertToHalf) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--alpha must be in [0, 1]"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "bad.safetensors"));
+  // --terms: the training data's terms travel in the file's metadata, the tensors untouched.
+  r = test::run_gaia("convert '" + (d / "half.safetensors").string() + "' --terms 'research use only' --out '" +
+                     (d / "terms.safetensors").string() + "'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  {
+    SafetensorsFile half(d / "half.safetensors"), t(d / "terms.safetensors");
+    EXPECT_EQ(t.metadata().at("gaia.terms"), "research use only");
+    for (const auto& n : half.names()) {
+      const auto a = half.get(n), b = t.get(n);
+      ASSERT_EQ(a.dtype, b.dtype) << n;
+      ASSERT_EQ(a.nbytes, b.nbytes) << n;
+      EXPECT_EQ(std::memcmp(a.data, b.data, a.nbytes), 0) << n;
+    }
+  }
   // --alpha alone would be ignored: refused.
   r = test::run_gaia("convert '" + src.string() + "' --half --alpha 0.5 --out '" + (d / "bad.safetensors").string() + "'");
   EXPECT_NE(r.status, 0);

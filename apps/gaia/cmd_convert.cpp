@@ -31,10 +31,14 @@ void register_convert(CLI::App& app) {
                   "more of what the fine-tune would cost)");
   auto* alpha_opt = cmd->add_option("--alpha", *alpha, "with --interpolate-from: 0 = FROM, 1 = WEIGHTS (beyond: extrapolates)")
                         ->check(kSignedNumber);
+  auto terms = std::make_shared<std::string>();
+  cmd->add_option("--terms", *terms,
+                  "the terms of use the weights carry from their training data (stored as gaia.terms metadata), e.g. "
+                  "\"research use only\"");
   cmd->add_option("--out", *out, "output file (may be WEIGHTS itself)")->required();
   cmd->callback([=] {
-    if (!*half && sets->empty() && from->empty())
-      fail("gaia convert: say --half, --set KEY=VALUE, --interpolate-from FROM or a combination");
+    if (!*half && sets->empty() && from->empty() && terms->empty())
+      fail("gaia convert: say --half, --set KEY=VALUE, --interpolate-from FROM, --terms TEXT or a combination");
     if (from->empty() && alpha_opt->count()) fail("gaia convert: --alpha needs --interpolate-from FROM");
     if (!from->empty() && !(*alpha >= 0 && *alpha <= 1)) fail("--alpha must be in [0, 1], got {}", *alpha);
     // Every check before anything is written. The interpolated weights carry WEIGHTS' metadata, so its config is
@@ -61,16 +65,18 @@ void register_convert(CLI::App& app) {
       }
       metadata["gaia.config"] = yaml;
     }
+    if (!terms->empty()) metadata["gaia.terms"] = *terms;
     std::string src = *in;
     if (!from->empty()) {
       interpolate_weights(*from, *in, *alpha, *out);
       std::printf("%s: %s + %.3g (%s - %s)\n", out->c_str(), from->c_str(), *alpha, in->c_str(), from->c_str());
-      if (!*half && sets->empty()) return;
+      if (!*half && sets->empty() && terms->empty()) return;
       src = *out;  // the rest rewrites the interpolated weights in place
     }
     const double err = rewrite_weights(src, *out, *half, metadata);
     if (*half) std::printf("%s -> %s (F16; largest rounding error %.3g)\n", src.c_str(), out->c_str(), err);
     for (const auto& kv : *sets) std::printf("%s: %s\n", out->c_str(), kv.c_str());
+    if (!terms->empty()) std::printf("%s: terms: %s\n", out->c_str(), terms->c_str());
   });
 }
 

@@ -265,7 +265,6 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   Readback truth_read, truth_coded_read;  // the probe on the ground truth (as rendered / through the tokenizer)
   std::vector<std::vector<double>> truth_nats;  // [3][R]: the replay's codes under the command / counter-command / none
   if (raw) {
-    const int stride = int(std::lround(raw->episode(0).meta().fps / (ds.rate_hz() > 0 ? ds.rate_hz() : 6.25)));
     const fs::path cf = out.dir / "counterfactual";
     for (int64_t r = 0; r < R; ++r) {
       const auto& id = ds.ids()[pr.episodes[size_t(r / C)]];
@@ -274,6 +273,8 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
         fail("{}: episode {} of the token dataset is not in this dataset (EPISODES must be the tokens' source)",
              raw->root().string(), id);
       data::Episode src = raw->episode(size_t(it - raw->ids().begin()));
+      // Native frames per token step of this drive (a dataset of recorded clips beside it has other rates).
+      const int stride = int(std::lround(src.meta().fps / (ds.rate_hz() > 0 ? ds.rate_hz() : 6.25)));
       const int64_t from = (pr.starts[size_t(r / C)] + P - 1) * stride;
       std::vector<synth::ActionStep> native;
       for (const auto& a : per_frame[size_t(r)])
