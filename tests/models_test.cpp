@@ -8,8 +8,10 @@
 #include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
+#include "gaia/core/safetensors.h"
 #include "gaia/emerging/text.h"
 #include "gaia/data/episode.h"
+#include "gaia/data/video_io.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/probe/trainer.h"
 #include "gaia/tokenizer/io.h"
@@ -256,3 +258,36 @@ TEST(ShippedModelsSlow, DemoTakesARealClipAsTheVideoPrompt) {
   EXPECT_TRUE(fs::exists(d / "real" / "videos" / "real.gif"));
   EXPECT_FALSE(fs::exists(d / "real" / "videos" / "steer_truth.gif"));  // no replay for a real clip
 }
+
+// The shipped realism probe reads a real clip it never saw (not among the release's clips) as camera footage and a
+// fresh procedural drive as not; the files trained on recorded footage carry its terms in their metadata.
+TEST(ShippedModelsSlow, RealismProbeTellsAnUnseenRealClipFromAFreshProceduralDrive) {
+  if (!fs::exists(model("probe-realism.safetensors"))) GTEST_SKIP() << "models/probe-realism.safetensors not shipped";
+  const fs::path clip = test::real_data_dir() / "highway-sunny-720p25.mp4";
+  if (!fs::exists(clip)) GTEST_SKIP() << "real clip " << clip << " absent (the real clips live beside the repository)";
+  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "probe-realism.safetensors"}) {
+    SafetensorsFile w(model(f));
+    ASSERT_TRUE(w.metadata().count("gaia.terms")) << f;
+    EXPECT_EQ(w.metadata().at("gaia.terms").rfind("research use only", 0), 0u) << f;
+  }
+  test::TempDir d;
+  auto read = [&](const fs::path& video) {
+    auto r = test::run_gaia("probe read " + q(video) + " --probe " + q(model("probe-realism.safetensors")) + " --threads 1");
+    EXPECT_EQ(r.status, 0) << r.output;
+    return nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  };
+  auto real = read(clip);
+  EXPECT_EQ(real["frames"].get<int>(), 100);
+  EXPECT_GE(real["read_as_real"].get<double>(), 0.9) << real.dump();
+  const auto ds = fresh_synth(d, "", {{"clear", "day"}});
+  std::vector<cv::Mat> frames;
+  {
+    data::Dataset set(ds);
+    auto ep = set.episode(0);
+    for (int64_t k = 0; k < 100; k += 2) frames.push_back(ep.frame_bgr(k));
+  }
+  data::write_video(d / "synth.mp4", frames, 25);
+  auto procedural = read(d / "synth.mp4");
+  EXPECT_LE(procedural["read_as_real"].get<double>(), 0.1) << procedural.dump();
+}
+
