@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 
 #include <fmt/ranges.h>
 
@@ -148,7 +149,11 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
          m.dynamics->frames, m.dynamics->frames - 1, F);
   const auto cmds = action_commands(o.commands);
   const int64_t C = int64_t(cmds.size()), R = int64_t(o.prompts) * C;
-  auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed, o.footage);
+  // With EPISODES, only drives it holds can be replayed: a mirror image (gaia tokenize --mirror) has no drive there.
+  std::set<std::string> replayable;
+  if (raw) replayable.insert(raw->ids().begin(), raw->ids().end());
+  auto pr = held_out_prompts(ds, o.prompts, P, P + F + 1, m.info.config.run.seed, o.footage,
+                             [&](size_t e) { return !raw || replayable.count(ds.ids()[e]) > 0; });
   if (raw)
     for (size_t e : pr.episodes)
       if (!ds.meta(e).is_procedural())
