@@ -41,11 +41,9 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--dynamics-probe", e->dynamics_probe, "dynamics probe weights (default: the shipped one)");
   cmd->add_option("--scene-probe", e->scene_probe, "scene probe weights (default: the shipped one)");
   cmd->add_option("--only", e->only, "comma-separated parts: action, text, futures, long");
-  cmd->add_option("--prompt-footage", e->prompt_footage,
-                  "which held-out episodes give the video prompts (and the real reference): any (default), real "
-                  "(recorded footage) or procedural; a dataset of both measures each apart. With real, text control "
-                  "continues held-out recorded daytime drives under its prompts instead of generating from scratch")
-      ->check(CLI::IsMember({"any", "real", "procedural"}));
+  add_footage_flag(cmd, "--prompt-footage", &e->prompt_footage,
+                   "which held-out episodes give the video prompts and the real reference (a dataset of both measures "
+                   "each apart; with real, text control continues held-out recorded daytime drives under its prompts)");
   cmd->add_option("--realism-probe", e->realism_probe,
                   "realism probe weights (probe-realism.safetensors): futures also report the share of generated "
                   "frames read as real, beside the held-out frames' own share");

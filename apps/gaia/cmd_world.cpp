@@ -150,10 +150,8 @@ void register_world(CLI::App& app) {
                     "tokens (1 = argmax, 0 = the whole distribution; default: 1, world.top_k, 0)")
         ->delimiter(',');
     cmd->add_option("--sweep-windows", *sweep_windows, "held-out windows whose last frame each strategy generates");
-    auto footage = std::make_shared<std::string>("any");
-    cmd->add_option("--footage", *footage,
-                    "which held-out episodes are scored: any (default), real (recorded footage) or procedural")
-        ->check(CLI::IsMember({"any", "real", "procedural"}));
+    auto footage = std::make_shared<std::string>();
+    add_footage_flag(cmd, "--footage", footage.get(), "which held-out episodes are scored");
     add_shared_flags(cmd, flags.get(), "output directory (eval.json, perplexity_by_position.svg)");
     cmd->callback([=] {
       Config run = resolve_config(*flags);

@@ -265,4 +265,10 @@ torch::Tensor read_tokens(const fs::path& p, int64_t* prompt_frames) {
   return t;
 }
 
+CLI::Option* add_footage_flag(CLI::App* cmd, const std::string& name, std::string* into, const std::string& what) {
+  *into = "any";
+  return cmd->add_option(name, *into, what + ": any (default), real (recorded footage) or procedural")
+      ->check(CLI::IsMember({"any", "real", "procedural"}));
+}
+
 }  // namespace gaia::app

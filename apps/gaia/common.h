@@ -48,6 +48,10 @@ CLI::Option* add_weights_flag(CLI::App* cmd, Weights which, Path* path, const st
   return cmd->add_option(weights_flag_name(which), *path, weights_flag_help(which, use));
 }
 
+// Which episodes a measure reads (world/footage.h): `name` (--footage, --prompt-footage) takes any, real or
+// procedural, default any; `what` says what the choice selects.
+CLI::Option* add_footage_flag(CLI::App* cmd, const std::string& name, std::string* into, const std::string& what);
+
 // How to read token files of other tokenizers (world/token_file.h, docs/formats.md): --grid HxW, --codebook-size
 // K, --token-fps F, --keep-rate. Commands given world-model weights take the grid and K from them.
 struct TokenFormatFlags {
