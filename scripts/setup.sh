@@ -20,6 +20,10 @@ PKGS=(
   libsentencepiece-dev         # T5's tokenizer (SentencePiece) for the frozen text encoder (§2.1)
   liblzma-dev libzstd-dev      # xz -9 and zstd -19 as floors in world-model evaluation (bits per token)
   chromium                     # headless browser: the report test renders gaia report pages and checks screenshots
+  pybind11-dev python3-dev     # the `gaia` Python module (python/, docs/python.md)
+  python3-numpy python3-pytest # ... its arrays and its tests
+  python3-venv python3-setuptools python3-wheel python3-pip  # ... `pip install .` of a checkout, tested in a venv
+  python3-torch                # the PyTorch policy example and the Python peers of tests and benchmarks
 )
 
 missing=()

@@ -169,7 +169,7 @@ TEST(HardeningCli, PromptStartAndTokenIdsAreChecked) {
   EXPECT_FALSE(fs::exists(dir / "mixed"));
   // A million futures do not fit in memory: refused up front with what they would need, nothing written.
   r = test::run_gaia(gen + " --futures 1000000 --out " + q(dir / "many"));
-  expect_one_error_line(r, "--futures 1000000");
+  expect_one_error_line(r, "futures = 1000000");
   EXPECT_TRUE(std::regex_search(r.output, std::regex("would need about [0-9.]+ GB of memory, but [0-9.]+ GB are available")))
       << r.output;
   EXPECT_FALSE(fs::exists(dir / "many"));

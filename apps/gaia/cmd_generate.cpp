@@ -8,9 +8,9 @@
 #include "episode_prompt.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
-#include "gaia/sizing/sizing.h"
 #include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
+#include "gaia/world/generate.h"
 #include "gaia/world/io.h"
 #include "gaia/world/prompt_text.h"
 #include "gaia/world/rollout.h"
@@ -37,16 +37,6 @@ struct GenerateFlags {
   double speed = -1, top_p = 0.9, temperature = -1, guidance = 0;
   TokenFormatFlags format;  // TOKENS from another tokenizer
 };
-
-// Steering presets (curvature in 1/m, + = left): a gentle bend (~100 m radius) and a sharp one (~30 m).
-double steer_curvature(const std::string& s) {
-  if (s == "left") return 0.01;
-  if (s == "right") return -0.01;
-  if (s == "strong-left") return 0.033;
-  if (s == "strong-right") return -0.033;
-  if (s == "straight") return 0.0;
-  fail("--steer: unknown preset '{}' (choose left, right, strong-left, strong-right, straight or none)", s);
-}
 
 }  // namespace
 
@@ -114,13 +104,10 @@ void register_generate(CLI::App& app) {
     if (F < 1) fail("--frames must be >= 1");
 
     // Video prompt: tokens [P, n] and the prompt's own actions.
-    world::RolloutPrompt p;
-    torch::Tensor prompt_actions;
-    int64_t P = 0;
+    world::GenerateRequest req;
     const int64_t want_p = g->prompt_frames >= 0 ? g->prompt_frames : std::min<int64_t>(L.T - 1, 4);
-    const bool preview = !g->tokenizer.empty();  // a preview video through the tokenizer's decoder
 #ifdef GAIA_NO_VIDEO
-    if (preview || !g->video.empty() || !g->actions_csv.empty())
+    if (!g->tokenizer.empty() || !g->video.empty() || !g->actions_csv.empty())
       fail("--tokenizer, --video and --actions need a build with video support (this one was built with "
            "-DGAIA_WITH_VIDEO=OFF): prompt from TOKENS, steer with --steer / --speed, decode elsewhere");
 #else
@@ -137,102 +124,78 @@ void register_generate(CLI::App& app) {
         fail("{}: a {}x{} token grid, the world model {} takes {}x{}", g->tokens, ds.grid_h(), ds.grid_w(), g->world,
              info.grid_h, info.grid_w);
       const size_t e = g->episode.empty() ? 0 : ds.find(g->episode);
-      P = std::min<int64_t>(want_p, ds.steps(e) - g->start);
+      const int64_t P = std::min<int64_t>(want_p, ds.steps(e) - g->start);
       if (P <= 0) fail("--start {} is past the end of episode {} ({} steps)", g->start, ds.ids()[e], ds.steps(e));
       auto ep = episode_prompt(ds, e, g->start, P);
-      p.tokens = ep.tokens;
-      prompt_actions = ep.actions;
-      prompt_actions.select(1, 0).div_(world::kSpeedScale);
-      prompt_actions.select(1, 1).div_(world::kCurvatureScale);
+      req.prompt_tokens = ep.tokens;
+      req.prompt_actions = ep.actions;
     }
 #ifndef GAIA_NO_VIDEO
     else if (!g->video.empty()) {
       if (!tok) fail("--video needs --tokenizer to turn the frames into tokens");
-      auto frames = data::read_frames_at_rate(g->video, tok_cfg.data.world_fps, want_p, tok_cfg.data.height,
-                                              tok_cfg.data.width);
-      p.tokens = tokenizer::encode_frames(tok, frames, dev).reshape({int64_t(frames.size()), -1}).to(torch::kCPU);
-      if (p.tokens.size(1) != L.n) fail("the tokenizer gives {} tokens per frame, the world model takes {}", p.tokens.size(1), L.n);
-      P = p.tokens.size(0);
+      req.prompt_tokens = tokenizer::video_prompt_tokens(tok, tok_cfg, g->video, want_p, L.n, dev);
     }
 #endif
+    const int64_t P = req.prompt_tokens.defined() ? req.prompt_tokens.size(0) : 0;
     const int64_t steps = P + F;
 
-    // Actions: prompt steps keep theirs; generated steps from --actions / --steer / --speed, otherwise none.
-    torch::Tensor acts = torch::full({steps, 2}, std::numeric_limits<float>::quiet_NaN());
-    if (prompt_actions.defined()) acts.narrow(0, 0, P).copy_(prompt_actions);
-    bool any_action = prompt_actions.defined();
-    double last_speed = 8.0;  // m/s when neither --speed nor a prompt says
-    if (P > 0 && prompt_actions.defined() && !std::isnan(prompt_actions[P - 1][0].item<float>()))
-      last_speed = prompt_actions[P - 1][0].item<float>() * world::kSpeedScale;
-    if ((!g->actions_csv.empty() || g->steer != "none" || g->speed >= 0) && info.action_share == 0)
-      fail("{}: this world model never saw an action (trained on drives without speed or curvature), so --steer, "
-           "--speed and --actions would do nothing; train on drives with signals (or gaia ingest --motion video)",
-           g->world);
+    // Commands for the generated steps: --actions, or --steer / --speed at the prompt's last speed.
 #ifndef GAIA_NO_VIDEO
     if (!g->actions_csv.empty()) {
       auto rows = synth::read_actions_csv(g->actions_csv);
       if (int64_t(rows.size()) != F)
         fail("{}: {} action rows but --frames is {} (one row per generated frame)", g->actions_csv, rows.size(), F);
+      req.actions = torch::empty({F, 2});
       for (int64_t k = 0; k < F; ++k) {
-        acts[P + k][0] = rows[size_t(k)].speed / world::kSpeedScale;
-        acts[P + k][1] = rows[size_t(k)].curvature / world::kCurvatureScale;
+        req.actions[k][0] = rows[size_t(k)].speed;
+        req.actions[k][1] = rows[size_t(k)].curvature;
       }
-      any_action = true;
     } else
 #endif
     if (g->steer != "none" || g->speed >= 0) {
-      const double v = g->speed >= 0 ? g->speed : last_speed;
-      const double c = g->steer != "none" ? steer_curvature(g->steer) : 0.0;
-      acts.narrow(0, P, F).select(1, 0).fill_(v / world::kSpeedScale);
-      acts.narrow(0, P, F).select(1, 1).fill_(c / world::kCurvatureScale);
-      any_action = true;
+      double v = g->speed;
+      if (v < 0) {  // the prompt's last speed
+        v = world::kDefaultCommandSpeed;
+        if (P > 0 && req.prompt_actions.defined() && !std::isnan(req.prompt_actions[P - 1][0].item<float>()))
+          v = req.prompt_actions[P - 1][0].item<float>();
+      }
+      const double c = g->steer != "none" ? world::steer_curvature(g->steer) : 0.0;
+      req.actions = torch::stack({torch::full({F}, v), torch::full({F}, c)}, 1).to(torch::kFloat);
     }
-    if (any_action) p.actions = acts;
-    const bool commanded = !std::isnan(acts[P][0].item<float>());  // the generated steps have actions
-    if (commanded && g->action_negative == "mirror")  // the counter-command: the other way, the prompt's speed
-      p.negative_actions = world::counter_actions(acts, P, torch::tensor(last_speed));
-    if (!g->text.empty() || !g->negative.empty()) {
-      auto encoder = world::prompt_encoder(info, g->world, g->t5, dev);
-      if (!g->text.empty()) world::set_prompt_text(p, encoder->encode(g->text, L.m), steps);
-      if (!g->negative.empty()) world::set_prompt_text(p, encoder->encode(g->negative, L.m), steps, true);
-    }
+    req.text = g->text;
+    req.negative = g->negative;
+    req.mirror_negative = g->action_negative == "mirror";
     for (auto [file, neg] : {std::pair{&g->text_emb, false}, std::pair{&g->negative_emb, true}}) {
       if (file->empty()) continue;
       if (!info.embeds_text())
         fail("{}: reads text with its own words; --text-emb / --negative-emb are for models trained on text "
              "embeddings", g->world);
-      (neg ? p.negative_text_emb : p.text_emb) = world::read_prompt_embeddings(*file, info, steps);
+      (neg ? req.negative_emb : req.text_emb) = world::read_prompt_embeddings(*file, info, steps);
     }
-    const bool has_text = p.text_ids.defined() || p.text_emb.defined();
+    std::shared_ptr<text::TextEncoder> encoder;
+    if (!g->text.empty() || !g->negative.empty()) encoder = world::prompt_encoder(info, g->world, g->t5, dev);
 
-    world::RolloutOptions o;
+    world::RolloutOptions& o = req.options;
+    o = world::default_options(info);
     o.frames = int(F);
     o.futures = g->futures;
     o.window_stride = g->window_stride;
     o.seed = uint64_t(run.run.seed);
     o.sampling.strategy = world::parse_strategy(g->sampling.empty() ? "top-k" : g->sampling);
-    o.sampling.top_k = g->top_k > 0 ? g->top_k : info.config.world.top_k;
+    if (g->top_k > 0) o.sampling.top_k = g->top_k;
     o.sampling.top_p = g->top_p;
-    o.sampling.temperature = g->temperature > 0 ? g->temperature : info.config.world.temperature;
-    o.sampling.guide_actions_within_top_k = info.config.world.guide_actions_within_top_k;
-    o.guidance.scale = guidance_opt->count() ? g->guidance : info.config.world.guidance_scale;  // the file's default
+    if (g->temperature > 0) o.sampling.temperature = g->temperature;
+    if (guidance_opt->count()) o.guidance.scale = g->guidance;
     o.guidance.tokens = world::parse_token_schedule(g->token_schedule);
     o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
     o.guidance.plateau = g->plateau;
-    o.guidance.total_frames = int(F);
-    if (o.guidance.active() && !p.actions.defined() && !has_text && !p.negative_text_ids.defined() &&
-        !p.negative_text_emb.defined())
-      fail("--guidance needs something to guide towards: --text, --negative, --actions, --steer or --speed");
-
-    const int passes = o.guidance.active() ? (p.actions.defined() && has_text ? 3 : 2) : 1;
-    sizing::check_memory(sizing::rollout_memory_bytes(info.config, g->futures, steps, passes, preview),
-                       fmt::format("--futures {} over {} steps", g->futures, steps));
     ProgressBar bar(F, "generate");
     const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
       std::fprintf(stderr, "generate: %s\n", n.c_str());
     });
     Autocast autocast(precision, dev);  // run.precision: bf16 / fp16 sampling
-    auto r = world::rollout(model, p, o, [&](int done, int) { bar.update(done); });
+    auto r = world::generate(model, info, g->world, req, encoder, [&](int done, int) { bar.update(done); });
+    const auto& acts = r.actions;
     bar.finish();
     fs::create_directories(flags->out);
     auto grid = r.tokens.view({g->futures, steps, info.grid_h, info.grid_w}).to(torch::kInt);

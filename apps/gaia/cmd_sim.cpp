@@ -171,12 +171,7 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
       const std::string name = fs::path(path).stem().string();
       for (const auto& v : videos)
         if (v.first == name) fail("--video {}: a second prompt named '{}' (prompts are named by file name)", path, name);
-      auto f = data::read_frames_at_rate(path, tok_cfg.data.world_fps, g.video_frames, tok_cfg.data.height,
-                                         tok_cfg.data.width);
-      auto tokens = tokenizer::encode_frames(tok, f, dev).reshape({int64_t(f.size()), -1}).to(torch::kCPU);
-      if (tokens.size(1) != model->layout.n)
-        fail("--video {}: the tokenizer gives {} tokens per frame, the world model takes {}", path, tokens.size(1),
-             model->layout.n);
+      auto tokens = tokenizer::video_prompt_tokens(tok, tok_cfg, path, g.video_frames, model->layout.n, dev);
       std::fprintf(stderr, "gaia sim: video prompt '%s': %ld frames\n", name.c_str(), long(tokens.size(0)));
       videos.emplace_back(name, tokens);
     }

@@ -1,5 +1,7 @@
 #include "gaia/sim/session.h"
 
+#include "gaia/world/generate.h"
+
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
 #include "gaia/world/batch.h"
@@ -20,14 +22,13 @@ SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, c
                        std::shared_ptr<text::TextEncoder> text)
     : model_(&model), info_(&info), mirror_(s.mirror_negative), mirror_keeps_speed_(s.negative_keeps_speed), encoder_(std::move(text)) {
   if (!encoder_ && !info.embeds_text()) encoder_ = std::make_shared<text::WordEncoder>(info.vocab);
-  const auto& w = info.config.world;
+  o_ = world::default_options(info);  // the weights' sampling, as gaia generate's
   o_.seed = s.seed;
   o_.window_stride = s.window_stride;
   o_.sampling.strategy = world::parse_strategy(s.sampling);
-  o_.sampling.top_k = s.top_k > 0 ? s.top_k : w.top_k;
-  o_.sampling.temperature = s.temperature > 0 ? s.temperature : w.temperature;
-  o_.sampling.guide_actions_within_top_k = w.guide_actions_within_top_k;
-  o_.guidance.scale = s.guidance_scale >= 0 ? s.guidance_scale : w.guidance_scale;
+  if (s.top_k > 0) o_.sampling.top_k = s.top_k;
+  if (s.temperature > 0) o_.sampling.temperature = s.temperature;
+  if (s.guidance_scale >= 0) o_.guidance.scale = s.guidance_scale;
   if (!(o_.guidance.scale >= 0 && o_.guidance.scale <= 100))
     fail("guidance scale must be in [0, 100], got {}", o_.guidance.scale);
   if (s.window_stride < 1 || s.window_stride >= model->layout.T)

@@ -1,8 +1,11 @@
 #include "gaia/world/evaluate.h"
 
 #include <cmath>
+#include <limits>
 
+#include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
+#include "gaia/world/batch.h"
 #include "gaia/world/rollout.h"
 
 namespace gaia::world {
@@ -79,6 +82,53 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
   if (s.tokens == 0) return s;
   const double per_pos = double(s.tokens) / double(n);
   for (int64_t i = 0; i < n; ++i) s.by_position[size_t(i)] = sum_pos[i].item<double>() / per_pos;
+  s.nats = sum_pos.sum().item<double>() / double(s.tokens);
+  return s;
+}
+
+Score score_tokens(WorldModel& model, const WorldInfo& info, const torch::Tensor& tokens,
+                   const torch::Tensor& actions, int64_t batch) {
+  const auto& L = model->layout;
+  if (tokens.dim() != 2 || tokens.size(1) != L.n || tokens.size(0) < 1)
+    fail("tokens: shape [S >= 1, n = {}] expected, got {}", L.n, shape_str(tokens.sizes().vec()));
+  auto z = tokens.to(torch::kCPU).to(torch::kLong).contiguous();
+  const auto lo = z.min().item<int64_t>(), hi = z.max().item<int64_t>();
+  if (lo < 0 || hi >= info.K) fail("tokens: ids in [0, K = {}) expected, got {}..{}", info.K, lo, hi);
+  const int64_t S = z.size(0);
+  auto a = torch::full({S, 2}, std::numeric_limits<float>::quiet_NaN());
+  if (actions.defined()) {
+    if (actions.dim() != 2 || actions.size(0) != S || actions.size(1) != 2)
+      fail("actions: shape [{}, 2] expected (one speed and curvature a step), got {}", S,
+           shape_str(actions.sizes().vec()));
+    a = actions.to(torch::kCPU).to(torch::kFloat).clone();
+    if (a.isinf().any().item<bool>()) fail("actions: hold an infinite value");
+    a.select(1, 0).div_(kSpeedScale);
+    a.select(1, 1).div_(kCurvatureScale);
+  }
+  torch::NoGradGuard ng;
+  model->eval();
+  const auto dev = model->token_embedding->weight.device();
+  Score s;
+  auto sum_pos = torch::zeros({L.n}, torch::kDouble);
+  auto run = [&](const torch::Tensor& zb, const torch::Tensor& ab) {  // [B, T', n], [B, T', 2]
+    WorldBatch b;
+    b.tokens = zb;
+    b.actions = ab;
+    b.use_action = torch::ones({zb.size(0)}, torch::kBool);
+    b.use_text = torch::zeros({zb.size(0)}, torch::kBool);
+    auto nll = token_nll(model->forward(b.to(dev)), zb.to(dev));
+    sum_pos += nll.sum(std::vector<int64_t>{0, 1}).to(torch::kCPU, torch::kDouble);
+    s.tokens += nll.numel();
+  };
+  const int64_t full = S / L.T;
+  for (int64_t w0 = 0; w0 < full; w0 += batch) {
+    const int64_t B = std::min(batch, full - w0);
+    run(z.narrow(0, w0 * L.T, B * L.T).view({B, L.T, L.n}), a.narrow(0, w0 * L.T, B * L.T).view({B, L.T, 2}));
+  }
+  if (S % L.T) run(z.narrow(0, full * L.T, S % L.T).unsqueeze(0), a.narrow(0, full * L.T, S % L.T).unsqueeze(0));
+  s.by_position.resize(size_t(L.n));
+  const double per_pos = double(s.tokens) / double(L.n);
+  for (int64_t i = 0; i < L.n; ++i) s.by_position[size_t(i)] = sum_pos[i].item<double>() / per_pos;
   s.nats = sum_pos.sum().item<double>() / double(s.tokens);
   return s;
 }

@@ -38,6 +38,12 @@ struct Score {
 Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows, const TextSource& text,
             const ScoreOptions& o);
 
+// One token sequence scored as score() scores a dataset's windows: tokens [S, n] in windows of the context's T
+// steps, one after another (the last one shorter where T does not divide S), action-conditioned on `actions`
+// ([S, 2] speed m/s and curvature 1/m, NaN unknown; undefined: none). Errors name the field at fault.
+Score score_tokens(WorldModel& model, const WorldInfo& info, const torch::Tensor& tokens,
+                   const torch::Tensor& actions = {}, int64_t batch = 8);
+
 // Fig. 5: what a sampling strategy generates, scored like real tokens. The last frame of each window is generated
 // (`sampling`) from the window's T - 1 real frames before it, with its actions, and then scored by teacher forcing
 // with the same conditioning, so its per-position cross-entropy is what the model thought of its own draws; with
