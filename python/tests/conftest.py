@@ -9,8 +9,11 @@ import subprocess
 import numpy as np
 import pytest
 
-gaia = pytest.importorskip("gaia", reason="the gaia Python module was not built (it needs pybind11-dev, "
-                                          "python3-dev and python3-numpy; scripts/setup.sh installs them)")
+try:
+    import gaia
+except ImportError:  # test_module.py skips with one message; the other files are not collected
+    gaia = None
+    collect_ignore_glob = ["test_[!m]*.py"]
 
 ROOT = pathlib.Path(os.environ.get("GAIA_SOURCE_DIR", pathlib.Path(__file__).resolve().parents[2]))
 MODELS = ROOT / "models"
@@ -28,7 +31,8 @@ def run_gaia(*args, stdin=None):
 
 @pytest.fixture(autouse=True, scope="session")
 def one_thread():
-    gaia.set_threads(1)  # the CLI's tokens are compared at one thread
+    if gaia:
+        gaia.set_threads(1)  # the CLI's tokens are compared at one thread
 
 
 @pytest.fixture(scope="session")

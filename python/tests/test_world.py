@@ -66,3 +66,20 @@ def test_bad_requests_are_one_clear_error(world, tmp_path):
         world.bits_per_token(np.zeros((3, 9, 16), np.int16), np.full((3, 2), np.inf, np.float32))
     with pytest.raises(FileNotFoundError, match="world model"):
         gaia.WorldModel(str(tmp_path / "none.safetensors"))
+
+
+def test_video_decoder_decodes_futures_deterministically(world, tokenizer, models):
+    dec = gaia.VideoDecoder(str(models / "decoder.safetensors"), tokenizer)
+    z = world.rollout(frames=7, futures=2, seed=3)                       # [2, 7, 9, 16]
+    a = dec.decode(z[0], ddim_steps=2, fps=6.25, seed=1)
+    assert a.dtype == np.uint8 and a.shape == (7, 72, 128, 3)
+    np.testing.assert_array_equal(dec.decode(z[0], ddim_steps=2, fps=6.25, seed=1), a)  # the seed fixes the noise
+    both = dec.decode(z, ddim_steps=2, fps=6.25, seed=1)
+    assert both.shape == (2, 7, 72, 128, 3)
+    # The diffusion decoder refines the tokenizer's frames: close to them, not equal.
+    diff = np.abs(a.astype(np.int16) - tokenizer.decode(z[0]).astype(np.int16)).mean()
+    assert 0 < diff < 40
+    with pytest.raises(ValueError, match="fps: 6.25, 12.5 or 25 expected"):
+        dec.decode(z[0], fps=10)
+    with pytest.raises(FileNotFoundError):
+        gaia.VideoDecoder(str(models / "none.safetensors"), tokenizer)
