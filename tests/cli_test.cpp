@@ -246,3 +246,20 @@ TEST(Cli, ConvertSetsAStoredSamplingSetting) {
                         "no gaia.config metadata");
   EXPECT_FALSE(fs::exists(bad));
 }
+
+// The `gaia` launcher runs gaia-core with OMP_WAIT_POLICY=PASSIVE, which libgomp takes as it loads; a value the user
+// sets wins; without gaia-core beside it, one error line and exit 127.
+TEST(LauncherCli, RunsTheCoreWithPassiveOpenMpUnlessTheUserSaysOtherwise) {
+  auto r = test::run_shell("env -u OMP_WAIT_POLICY OMP_DISPLAY_ENV=TRUE " + test::gaia_command("--version") + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("OMP_WAIT_POLICY = 'PASSIVE'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("gaia 0."), std::string::npos) << r.output;
+  r = test::run_shell("OMP_WAIT_POLICY=ACTIVE OMP_DISPLAY_ENV=TRUE " + test::gaia_command("--version") + " 2>&1");
+  EXPECT_NE(r.output.find("OMP_WAIT_POLICY = 'ACTIVE'"), std::string::npos) << r.output;
+  test::TempDir d;
+  fs::copy_file(GAIA_BINARY, d / "gaia");
+  fs::permissions(d / "gaia", fs::perms::owner_exec, fs::perm_options::add);
+  r = test::run_shell(test::q(d / "gaia") + " --version 2>&1");
+  EXPECT_EQ(r.status, 127) << r.output;
+  EXPECT_EQ(r.output, "gaia: error: cannot run " + (d / "gaia-core").string() + ": No such file or directory\n");
+}

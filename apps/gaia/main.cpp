@@ -88,8 +88,9 @@ void install_last_resort_handlers() {
 
 // LibTorch's OpenMP threads spin at every barrier unless OMP_WAIT_POLICY says otherwise, and beside OpenBLAS's
 // threads or another process on the same cores the spinning threads take the cores from the ones with work: a run
-// slows down several times over. libgomp reads the variable once, as it loads, so the process starts itself again
-// with it set (once: the variable is then present). A value the user set wins.
+// slows down several times over. libgomp reads the variable once, as it loads. The `gaia` launcher sets it before
+// starting gaia-core; gaia-core run directly starts itself again with it set (once: the variable is then present).
+// A value the user set wins.
 void exec_with_passive_openmp(char** argv) {
   if (std::getenv("OMP_WAIT_POLICY")) return;
   ::setenv("OMP_WAIT_POLICY", "PASSIVE", /*overwrite=*/1);
