@@ -152,16 +152,8 @@ void register_generate(CLI::App& app) {
       }
     } else
 #endif
-    if (g->steer != "none" || g->speed >= 0) {
-      double v = g->speed;
-      if (v < 0) {  // the prompt's last speed
-        v = world::kDefaultCommandSpeed;
-        if (P > 0 && req.prompt_actions.defined() && !std::isnan(req.prompt_actions[P - 1][0].item<float>()))
-          v = req.prompt_actions[P - 1][0].item<float>();
-      }
-      const double c = g->steer != "none" ? world::steer_curvature(g->steer) : 0.0;
-      req.actions = torch::stack({torch::full({F}, v), torch::full({F}, c)}, 1).to(torch::kFloat);
-    }
+    if (g->steer != "none" || g->speed >= 0)
+      req.actions = world::steer_actions(g->steer, g->speed, req.prompt_actions, F);
     req.text = g->text;
     req.negative = g->negative;
     req.mirror_negative = g->action_negative == "mirror";

@@ -135,17 +135,10 @@ t5: the T5 folder of a world model trained on T5 embeddings (needed for its text
         if (frames < 1) throw py::value_error(fmt::format("frames: at least 1 expected, got {}", frames));
         if (actions && (steer || speed)) throw py::value_error("actions: give actions, or steer / speed, not both");
         if (actions) r.actions = action_rows(*actions, frames, "actions");
-        if (steer || speed) {
-          double v = world::kDefaultCommandSpeed;
-          if (speed) {
-            if (!(*speed >= 0 && *speed <= 100)) throw py::value_error(fmt::format("speed: [0, 100] m/s expected, got {}", *speed));
-            v = *speed;
-          } else if (P > 0 && r.prompt_actions.defined() && !std::isnan(r.prompt_actions[P - 1][0].item<float>())) {
-            v = r.prompt_actions[P - 1][0].item<float>();
-          }
-          const double c = steer ? world::steer_curvature(*steer) : 0.0;
-          r.actions = torch::stack({torch::full({frames}, v), torch::full({frames}, c)}, 1).to(torch::kFloat);
-        }
+        if (speed && !(*speed >= 0 && *speed <= 100))
+          throw py::value_error(fmt::format("speed: [0, 100] m/s expected, got {}", *speed));
+        if (steer || speed)
+          r.actions = world::steer_actions(steer ? *steer : "none", speed ? *speed : -1, r.prompt_actions, frames);
         if (action_negative != "mirror" && action_negative != "null")
           throw py::value_error("action_negative: \"mirror\" or \"null\" expected, got \"" + action_negative + "\"");
         r.mirror_negative = action_negative == "mirror";

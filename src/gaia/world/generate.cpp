@@ -20,6 +20,18 @@ double steer_curvature(const std::string& s) {
   fail("steer: unknown preset '{}' (choose left, right, strong-left, strong-right, straight or none)", s);
 }
 
+torch::Tensor steer_actions(const std::string& preset, double speed, const torch::Tensor& prompt_actions,
+                            int64_t frames) {
+  double v = speed;
+  if (v < 0) {
+    v = kDefaultCommandSpeed;
+    const int64_t P = prompt_actions.defined() ? prompt_actions.size(0) : 0;
+    if (P > 0 && !std::isnan(prompt_actions[P - 1][0].item<float>())) v = prompt_actions[P - 1][0].item<float>();
+  }
+  const double c = preset != "none" ? steer_curvature(preset) : 0.0;
+  return torch::stack({torch::full({frames}, v), torch::full({frames}, c)}, 1).to(torch::kFloat);
+}
+
 RolloutOptions default_options(const WorldInfo& info) {
   RolloutOptions o;
   o.sampling.top_k = info.config.world.top_k;

@@ -19,6 +19,10 @@ namespace gaia::world {
 // straight. Anything else fails naming the preset.
 double steer_curvature(const std::string& preset);
 inline constexpr double kDefaultCommandSpeed = 8.0;  // m/s when neither a command nor the prompt gives a speed
+// Commands for `frames` generated frames [frames, 2]: the preset's curvature ("none": 0) at `speed` m/s, or, with
+// speed < 0, at the prompt's last recorded speed ([P, 2], NaN unknown; undefined: none) or kDefaultCommandSpeed.
+torch::Tensor steer_actions(const std::string& preset, double speed, const torch::Tensor& prompt_actions,
+                            int64_t frames);
 
 // The weights' sampling defaults (world.top_k, world.temperature, world.guidance_scale, ...) as rollout options.
 RolloutOptions default_options(const WorldInfo& info);
