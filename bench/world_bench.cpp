@@ -4,6 +4,8 @@
 #include <torch/torch.h>
 
 #include "gaia/config.h"
+#include "gaia/sizing/sizing.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/optim.h"
 #include "gaia/world/model.h"
@@ -33,9 +35,15 @@ WorldBatch random_batch(const Config& c, int64_t B, int64_t T) {
 
 }  // namespace
 
+// Args: batch, precision (0 fp32, 1 bf16 through autocast as `gaia world train --precision bf16`).
 static void BM_WorldTrainStep(benchmark::State& st) {
   Config c = bench_config();
   const int64_t B = st.range(0);
+  const Precision precision = st.range(1) ? Precision::kBf16 : Precision::kFp32;
+  if (precision == Precision::kBf16 && !cpu_has_bf16()) {
+    st.SkipWithError("this CPU has no bf16 instructions: fp32 is the fast path");
+    return;
+  }
   torch::manual_seed(0);
   WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
   m->train();
@@ -43,13 +51,22 @@ static void BM_WorldTrainStep(benchmark::State& st) {
   auto b = random_batch(c, B, c.world.context_steps);
   for (auto _ : st) {
     opt->zero_grad();
-    auto loss = image_token_loss(m->forward(b), b.tokens);
+    torch::Tensor loss;
+    {
+      Autocast autocast(precision, torch::kCPU);
+      loss = image_token_loss(m->forward(b), b.tokens);
+    }
     loss.backward();
     opt->step();
   }
-  st.counters["tokens/s"] = benchmark::Counter(double(B * m->layout.length()) * st.iterations(), benchmark::Counter::kIsRate);
+  const double tokens = double(B * m->layout.length()) * double(st.iterations());
+  st.counters["tokens/s"] = benchmark::Counter(tokens, benchmark::Counter::kIsRate);
+  // The step's arithmetic as `gaia plan` counts it (6N + 6 L s d per token): held against BM_Peak (peak_bench.cpp)
+  st.counters["FLOP/s"] = benchmark::Counter(tokens * sizing::make_plan(c).world_flops_per_token_with_attn,
+                                              benchmark::Counter::kIsRate, benchmark::Counter::kIs1000);
+  st.SetLabel(precision == Precision::kBf16 ? "bf16" : "fp32");
 }
-BENCHMARK(BM_WorldTrainStep)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_WorldTrainStep)->Args({4, 0})->Args({4, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Where one generated token's time goes (a rollout is n = 144 of these per frame): the transformer body over the
 // cached context (half full), the head's logits, and top-k sampling.

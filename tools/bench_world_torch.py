@@ -348,6 +348,15 @@ def _set_openblas_threads(n):
     return int(h.openblas_get_num_threads())
 
 
+def openblas_core():
+    """The core type whose kernels OpenBLAS runs now ("haswell", "skylakex"), or None without OpenBLAS."""
+    h = _openblas()
+    if h is None or not hasattr(h, "openblas_get_corename"):
+        return None
+    h.openblas_get_corename.restype = ctypes.c_char_p
+    return h.openblas_get_corename().decode().lower()
+
+
 def run_bench(args):
     torch.manual_seed(0)
     model = WorldModel({}, DEFAULT_N, DEFAULT_K)
@@ -361,7 +370,8 @@ def run_bench(args):
     for i in range(2 + args.repeats):  # 2 warm-ups, then timed steps
         t0 = time.perf_counter()
         opt.zero_grad()
-        loss = image_token_loss(model(tokens, actions, text_ids), tokens)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=args.precision == "bf16"):
+            loss = image_token_loss(model(tokens, actions, text_ids), tokens)
         loss.backward()
         opt.step()
         dt = time.perf_counter() - t0
@@ -373,7 +383,8 @@ def run_bench(args):
     print(json.dumps({
         "torch": torch.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
         "openblas_threads": args.openblas_threads, "load_avg_before": args.load_before, "load_avg_after": os.getloadavg(),
-        "case": "world train step, default config, batch 8", "batch": B, "steps": T, "S": model.S,
+        "case": "world train step, default config", "precision": args.precision, "openblas_core": openblas_core(),
+        "batch": B, "steps": T, "S": model.S,
         "sequence_tokens_per_step": seq_tokens, "parameters": sum(p.numel() for p in model.parameters()),
         "runs": len(times), "median_s": med, "tokens_per_s": seq_tokens / med,
         "min_tokens_per_s": seq_tokens / max(times), "max_tokens_per_s": seq_tokens / min(times),
@@ -386,6 +397,8 @@ def main():
     ap.add_argument("--bench", action="store_true", help="time one AdamW training step of the default world model")
     ap.add_argument("--threads", type=int, default=2, help="torch.set_num_threads (default 2)")
     ap.add_argument("--repeats", type=int, default=7, help="timed steps for --bench (>= 3; default 7)")
+    ap.add_argument("--precision", choices=("fp32", "bf16"), default="fp32",
+                    help="--bench: forward and loss under torch.autocast bf16, as gaia's --precision bf16 (default fp32)")
     args = ap.parse_args()
     args.load_before = os.getloadavg()
     torch.set_num_threads(args.threads)

@@ -33,7 +33,8 @@ def test_decode_gives_frames_close_to_the_encoded_ones(tokenizer, drive):
     assert again.dtype == np.uint8 and again.shape == (6, 72, 128, 3) and again.flags.c_contiguous
     mse = np.mean((again.astype(np.float64) - frames) ** 2)
     assert 10 * np.log10(255 ** 2 / mse) > 20  # the shipped tokenizer's procedural PSNR is about 25 dB
-    np.testing.assert_array_equal(tokenizer.decode(tokens[0]), again[0])
+    # One frame alone or in a batch: the same up to the products' float rounding (batch sizes take other kernels)
+    assert np.abs(tokenizer.decode(tokens[0]).astype(int) - again[0]).max() <= 1
     np.testing.assert_array_equal(tokenizer.decode(tokens.astype(np.int64)), again)  # any integer dtype
 
 

@@ -16,3 +16,27 @@ def test_the_module_offers_its_classes():
     gaia.set_threads(before)
     with pytest.raises(ValueError, match="threads: at least 1"):
         gaia.set_threads(0)
+
+
+def test_importing_gaia_after_numpy_still_runs_openblas_kernels_for_this_cpu():
+    # NumPy loads the OpenBLAS that LibTorch uses; where it fell back to its oldest kernels on a CPU it does not
+    # know, gaia switches it as it loads (the last "Core:" line OpenBLAS prints); a core type the user set stands.
+    import os
+    import subprocess
+    import sys
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    env["OPENBLAS_VERBOSE"] = "2"
+
+    def last_core(extra):
+        out = subprocess.run([sys.executable, "-c", "import numpy, gaia"], env=dict(env, **extra),
+                             capture_output=True, text=True, check=True)
+        lines = [ln for ln in (out.stdout + out.stderr).splitlines() if ln.startswith("Core: ")]
+        return lines[-1][6:].lower() if lines else None
+
+    core = last_core({})
+    if core is None:
+        pytest.skip("this OpenBLAS says nothing of its kernels")
+    flags = open("/proc/cpuinfo").read()
+    if " avx2 " in flags and " fma " in flags:
+        assert core in {"haswell", "zen", "skylakex", "cooperlake", "sapphirerapids"}
+    assert last_core({"OPENBLAS_CORETYPE": "Prescott"}) == "prescott"

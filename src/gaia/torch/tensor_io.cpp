@@ -8,8 +8,15 @@
 
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
+#include "gaia/torch/openblas.h"
 
 namespace gaia {
+
+namespace {
+// Every program that links gaia's model code (gaia-core, the tests, the benchmarks, the Python module) runs
+// OpenBLAS's kernels for this CPU: here, as the program or module loads, after OpenBLAS and before any product.
+[[maybe_unused]] const bool openblas_kernels = use_openblas_kernels_of_this_cpu();
+}  // namespace
 
 torch::Device parse_device(const std::string& s) {
   static const std::regex re("(cpu|cuda)(:([0-9]+))?");
@@ -31,7 +38,7 @@ void set_torch_threads(int n) {
   // per core on top of LibTorch's own, so it is told the same count when present (looked up, not linked: the
   // reference BLAS has no such call).
   using SetThreads = void (*)(int);
-  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(n);
+  if (auto f = reinterpret_cast<SetThreads>(openblas_symbol("openblas_set_num_threads"))) f(n);
 }
 
 void configure_allocator() {
