@@ -10,6 +10,7 @@
 #include "gaia/train/optim.h"
 #include "gaia/world/model.h"
 #include "gaia/world/rollout.h"
+#include "gaia/world/token_step.h"
 
 using namespace gaia;
 using namespace gaia::world;
@@ -101,6 +102,27 @@ static void BM_TokenParts(benchmark::State& st) {
                                        : part == 1 ? "logits" : "logits+top-k sample");
 }
 BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// The fused token step alone (token_step.h, what a closed-loop frame runs n times on its sampling thread): one
+// token through every block and the head against a cache of T - 1 steps, as after a one-step slide.
+static void BM_TokenStep(benchmark::State& st) {
+  Config c = bench_config();
+  torch::manual_seed(0);
+  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+  m->eval();
+  c10::InferenceMode im;
+  const int64_t L = m->layout.length(), S = m->layout.per_step();
+  KVCache cache = m->make_cache(1, L);
+  m->body(torch::randn({1, L - S, m->d}), &cache);
+  const TokenStep step(*m);
+  auto tok = torch::zeros({1}, torch::kLong);
+  for (auto _ : st) {
+    cache.length = L - S + 16;  // the text tokens and a few image tokens of the frame in
+    benchmark::DoNotOptimize(step.logits(tok, c.world.context_steps - 1, 0, cache));
+  }
+  st.counters["tokens/s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_TokenStep)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 // `futures` x `frames` generated after a random prompt of T - 1 frames (the context is full for the first generated
 // frame), the window dropping `stride` steps when full. Counter: generated frames per second over all futures.

@@ -12,6 +12,7 @@
 #include "gaia/data/frame_set.h"
 #include "gaia/data/video_io.h"
 #include "gaia/probe/trainer.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
 #include "test_util.h"
@@ -816,6 +817,39 @@ TEST(SimCli, StdioSessionsGiveTheTokensOfGenerateAndAnswerEveryLine) {
   auto no = test::run_gaia("sim --world " + q(p.trained) + p.tiny());
   EXPECT_NE(no.status, 0);
   EXPECT_NE(no.output.find("--stdio"), std::string::npos) << no.output;
+}
+
+// --precision bf16 reaches the sessions: gaia sim gives gaia generate's tokens at bf16 (the fused token step with bf16
+// matrices on both), and a CPU without bf16 instructions runs both in fp32, saying so.
+TEST(SimCli, Bf16SessionsGiveTheTokensOfGenerateAtBf16) {
+  auto& p = Pipeline::get();
+  const std::string bf16 = " --precision bf16";
+  auto r = test::run_gaia("generate " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() + bf16 +
+                          " --episode 0 --prompt-frames 2 --frames 3 --steer left --speed 8 --seed 5 --out " +
+                          q(p.dir / "gen-sim-bf16"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const bool fallback = r.output.find("running in fp32 instead") != std::string::npos;
+  EXPECT_EQ(fallback, !cpu_has_bf16()) << r.output;
+  SafetensorsFile rollout(p.dir / "gen-sim-bf16" / "rollout.safetensors");
+  const auto want = tensor_from_view(rollout.get("tokens")).to(torch::kLong).reshape({5, -1});
+  const fs::path requests = p.dir / "sim-bf16.jsonl";
+  std::string lines = "{\"op\": \"create\", \"prompt\": {\"episode\": 0, \"frames\": 2}, \"seed\": 5}\n";
+  for (int i = 0; i < 3; ++i) lines += "{\"op\": \"step\", \"session\": 1, \"speed\": 8, \"curvature\": 0.01}\n";
+  write_file_atomic(requests, lines);
+  r = test::run_shell(test::gaia_command("sim " + q(p.tokens) + " --world " + q(p.trained) + p.tiny() + bf16 +
+                                         " --stdio") + " < " + q(requests) + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("running in fp32 instead") != std::string::npos, fallback) << r.output;
+  std::vector<nlohmann::json> answers;
+  std::istringstream in(r.output);
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty() && line[0] == '{') answers.push_back(nlohmann::json::parse(line));
+  ASSERT_EQ(answers.size(), 4u) << r.output;
+  for (int64_t k = 2; k < 5; ++k) {
+    const auto got = answers[size_t(k - 1)]["tokens"].get<std::vector<int64_t>>();
+    ASSERT_EQ(int64_t(got.size()), want.size(1));
+    EXPECT_TRUE(torch::equal(torch::tensor(got), want[k])) << "step " << k;
+  }
 }
 
 // gaia sim --video: a video file tokenized at start is a prompt by its name, and a session from it stepped with

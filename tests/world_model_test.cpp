@@ -182,6 +182,10 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
   const TokenStep fast(*m);
   EXPECT_TRUE(TokenStep::applies(*m, 2));
   EXPECT_FALSE(TokenStep::applies(*m, 64));
+  {
+    Autocast bf16(Precision::kBf16, torch::kCPU);  // --precision bf16: the token step itself stays float32
+    EXPECT_TRUE(TokenStep::applies(*m, 2));
+  }
   for (int64_t B : {1, 2, 3, 4}) {
     auto b = random_batch(c, B, 2);
     auto x = m->embed(b);  // a prefix of two whole steps

@@ -185,7 +185,8 @@ void register_generate(CLI::App& app) {
     const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
       std::fprintf(stderr, "generate: %s\n", n.c_str());
     });
-    Autocast autocast(precision, dev);  // run.precision: bf16 / fp16 sampling
+    o.precision = precision;            // each rollout step (and its lookahead thread) under it
+    Autocast autocast(precision, dev);  // run.precision: bf16 / fp16 for the text encoder and the prompt too
     auto r = world::generate(model, info, g->world, req, encoder, [&](int done, int) { bar.update(done); });
     const auto& acts = r.actions;
     bar.finish();

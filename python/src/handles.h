@@ -9,10 +9,15 @@
 
 #include "gaia/config.h"
 #include "gaia/text/encoder.h"
+#include "gaia/torch/precision.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/world/io.h"
 
 namespace gaia::python {
+
+// A `precision` argument ("fp32" | "bf16" | "fp16") on `dev`, as --precision: bf16 on a CPU without bf16
+// instructions runs in fp32 with a RuntimeWarning saying so. Needs the GIL.
+Precision precision_arg(const std::string& s, const torch::Device& dev);
 
 struct TokenizerHandle {
   tokenizer::ImageTokenizer tok{nullptr};

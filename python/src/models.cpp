@@ -21,6 +21,12 @@ std::shared_ptr<text::TextEncoder> WorldHandle::text() {
   return text_;
 }
 
+Precision precision_arg(const std::string& s, const torch::Device& dev) {
+  return precision_for(s, dev, [](const std::string& note) {
+    PyErr_WarnEx(PyExc_RuntimeWarning, ("precision: " + note).c_str(), 1);
+  });
+}
+
 std::shared_ptr<TokenizerHandle> load_tokenizer_handle(const std::string& path, const std::string& device) {
   require_path(path, "tokenizer");
   auto h = std::make_shared<TokenizerHandle>();
@@ -123,7 +129,8 @@ t5: the T5 folder of a world model trained on T5 embeddings (needed for its text
                          const std::string& sampling, std::optional<int> top_k, double top_p,
                          std::optional<double> temperature, std::optional<double> guidance,
                          const std::string& action_negative, const std::string& guidance_tokens,
-                         const std::string& guidance_frames, int plateau, int window_stride, uint64_t seed) {
+                         const std::string& guidance_frames, int plateau, int window_stride, uint64_t seed,
+                         const std::string& precision) {
         const auto gh = h.info.grid_h, gw = h.info.grid_w;
         world::GenerateRequest r;
         if (prompt) r.prompt_tokens = token_rows(*prompt, gh, gw, "prompt");
@@ -158,6 +165,7 @@ t5: the T5 folder of a world model trained on T5 embeddings (needed for its text
         o.guidance.tokens = world::parse_token_schedule(guidance_tokens);
         o.guidance.frames = world::parse_frame_schedule(guidance_frames);
         o.guidance.plateau = plateau;
+        o.precision = precision_arg(precision, h.dev);
         std::shared_ptr<text::TextEncoder> enc;
         if (!text.empty() || !negative.empty()) enc = h.text();
         world::GenerateResult out;
@@ -173,12 +181,13 @@ t5: the T5 folder of a world model trained on T5 embeddings (needed for its text
       py::arg("top_p") = 0.9, py::arg("temperature") = py::none(), py::arg("guidance") = py::none(),
       py::arg("action_negative") = "mirror", py::arg("guidance_tokens") = "constant",
       py::arg("guidance_frames") = "constant", py::arg("plateau") = 0, py::arg("window_stride") = 1,
-      py::arg("seed") = 0,
+      py::arg("seed") = 0, py::arg("precision") = "fp32",
       R"(Futures of a video prompt, as `gaia generate` rolls them out (the same seed and options, the same tokens).
 
 prompt: int16 tokens [P, h, w]; prompt_actions: float32 [P, 2] (speed m/s, curvature 1/m, NaN unknown);
 actions: float32 [frames, 2] commands, or steer ("left", "right", "strong-left", "strong-right", "straight")
-and/or speed (m/s); text / negative: prompts. Returns int16 tokens [futures, P + frames, h, w].)")
+and/or speed (m/s); text / negative: prompts; precision: "fp32" or "bf16" (--precision). Returns int16 tokens
+[futures, P + frames, h, w].)")
       .def("bits_per_token", [](WorldHandle& h, const py::array& tokens, std::optional<py::array> actions) {
         auto z = token_rows(tokens, h.info.grid_h, h.info.grid_w, "tokens");
         torch::Tensor a;

@@ -136,7 +136,8 @@ each step's frames back as speed and curvature. create() opens a session.)")
       .def("create", [](std::shared_ptr<SimHandle> h, std::optional<py::array> prompt,
                         std::optional<py::array> prompt_actions, const std::string& text, uint64_t seed,
                         std::optional<double> guidance, const std::string& sampling, std::optional<int> top_k,
-                        std::optional<double> temperature, int window_stride, const std::string& action_negative) {
+                        std::optional<double> temperature, int window_stride, const std::string& action_negative,
+                        const std::string& precision) {
         auto& w = *h->world;
         sim::SessionSettings s;
         s.seed = seed;
@@ -145,6 +146,7 @@ each step's frames back as speed and curvature. create() opens a session.)")
         s.top_k = top_k ? *top_k : -1;
         s.temperature = temperature ? *temperature : -1;
         s.window_stride = window_stride;
+        s.precision = precision_arg(precision, w.dev);
         if (action_negative != "mirror" && action_negative != "turn" && action_negative != "null")
           throw py::value_error("action_negative: \"mirror\", \"turn\" or \"null\" expected, got \"" + action_negative + "\"");
         s.mirror_negative = action_negative != "null";
@@ -173,9 +175,10 @@ each step's frames back as speed and curvature. create() opens a session.)")
       py::arg("prompt") = py::none(), py::arg("prompt_actions") = py::none(), py::arg("text") = "",
       py::arg("seed") = 0, py::arg("guidance") = py::none(), py::arg("sampling") = "top-k",
       py::arg("top_k") = py::none(), py::arg("temperature") = py::none(), py::arg("window_stride") = 1,
-      py::arg("action_negative") = "mirror",
+      py::arg("action_negative") = "mirror", py::arg("precision") = "fp32",
       R"(A session from a video prompt: int16 tokens [P, h, w] with their actions [P, 2] (speed m/s, curvature
-1/m, NaN unknown), a text prompt and the sampling settings of `gaia sim`'s create.)")
+1/m, NaN unknown), a text prompt and the sampling settings of `gaia sim`'s create; precision as `gaia sim
+--precision` ("fp32" or "bf16").)")
       .def_property_readonly("world", [](const SimHandle& h) { return h.world; })
       .def_property_readonly("tokenizer", [](const SimHandle& h) { return h.tok; });
 

@@ -79,6 +79,8 @@ def test_bad_steps_are_one_clear_error(sim, models):
         s.step(-1, 0)
     with pytest.raises(ValueError, match="action_negative"):
         sim.create(action_negative="sideways")
+    with pytest.raises(ValueError, match="precision 'half': expected fp32, bf16 or fp16"):
+        sim.create(precision="half")
     with pytest.raises(ValueError, match=r"prompt: an integer dtype"):
         sim.create(prompt=np.zeros((2, 9, 16), np.float64))
     with pytest.raises(ValueError, match="not a dynamics probe"):

@@ -25,6 +25,19 @@ def test_rollout_gives_the_tokens_of_gaia_generate(world, drive, models):
                                                 guidance=4, frames=3, futures=2, seed=5), expected)
 
 
+def test_rollout_at_bf16_gives_the_tokens_of_gaia_generate_at_bf16(world, drive, models):
+    out = drive["dir"] / "gen-bf16"
+    run_gaia("generate", drive["tokens"], "--world", models / "world.safetensors", "--episode", "0", "--start", "3",
+             "--prompt-frames", "2", "--frames", "3", "--steer", "left", "--seed", "5", "--precision", "bf16",
+             "--out", out)
+    ep = gaia.Dataset(str(drive["tokens"]))[0]
+    got = world.rollout(prompt=ep.tokens[3:5], prompt_actions=ep.actions[3:5], steer="left", frames=3, seed=5,
+                        precision="bf16")
+    np.testing.assert_array_equal(got, read_rollout(out / "rollout.safetensors"))
+    with pytest.raises(ValueError, match="precision 'fp64': expected fp32, bf16 or fp16"):
+        world.rollout(frames=1, precision="fp64")
+
+
 def test_rollout_from_nothing_with_text_and_argmax_is_deterministic(world):
     a = world.rollout(frames=2, sampling="argmax", text="night rain")
     b = world.rollout(frames=2, sampling="argmax", text="night rain", seed=9)

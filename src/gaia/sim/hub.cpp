@@ -192,6 +192,7 @@ HubReply SessionHub::create(const json& r) {
   s.top_k = int(f.integer("top_k", 1, 1 << 20, -1));
   s.temperature = f.number("temperature", 1e-3, 100, -1);
   s.window_stride = int(f.integer("window_stride", 1, 1 << 20, 1));
+  s.precision = limits_.precision;
   const auto negative = f.text("action_negative", "mirror");
   if (negative != "mirror" && negative != "turn" && negative != "null")
     fail("'action_negative' must be \"mirror\", \"turn\" or \"null\"");

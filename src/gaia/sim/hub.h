@@ -23,6 +23,7 @@ struct HubLimits {
   int max_sessions = 8;
   int max_queue = 4;       // requests that may wait while a session answers another
   double idle_s = 600;     // a session untouched this long is closed
+  Precision precision = Precision::kFp32;  // not a limit: every session's products (--precision)
 };
 
 struct HubReply {

@@ -25,6 +25,7 @@ SimSession::SimSession(world::WorldModel& model, const world::WorldInfo& info, c
   o_ = world::default_options(info);  // the weights' sampling, as gaia generate's
   o_.seed = s.seed;
   o_.window_stride = s.window_stride;
+  o_.precision = s.precision;
   o_.sampling.strategy = world::parse_strategy(s.sampling);
   if (s.top_k > 0) o_.sampling.top_k = s.top_k;
   if (s.temperature > 0) o_.sampling.temperature = s.temperature;

@@ -30,6 +30,7 @@ struct SessionSettings {
   int window_stride = 1;        // §2.3: slide the window by one step
   bool mirror_negative = true;  // guidance contrasts a command with its mirror image at the prompt's speed
   bool negative_keeps_speed = false;  // ... at the command's own speed instead: guidance on the turn alone
+  Precision precision = Precision::kFp32;  // the products' (RolloutOptions::precision): the server's --precision
 };
 
 struct Action {

@@ -123,6 +123,7 @@ RolloutStepper::RolloutStepper(WorldModel& model, const RolloutOptions& o, int64
 
 torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& given) {
   torch::NoGradGuard ng;
+  Autocast autocast(o_.precision, dev_);  // on whichever thread steps (a session's), as the lookahead's below
   model_->eval();
   const auto& L = model_->layout;
   const int64_t B = guided_ ? 2 * N_ : N_, n = L.n, d = model_->d, k = k_;
@@ -184,8 +185,11 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
     auto cache = ahead_.cache;  // shares the tensors; the length is set when the result is taken
     auto row = tokens_.select(1, k);  // [B, n], written token by token by this thread
     ahead_.first = first;
-    ahead_.job = std::async(std::launch::async, [model, hist, now, cache, row, progress, t, n, B, d]() mutable {
+    const Precision precision = o_.precision;
+    ahead_.job = std::async(std::launch::async, [model, hist, now, cache, row, progress, t, n, B, d,
+                                                 precision]() mutable {
                    torch::NoGradGuard ng;
+                   Autocast autocast(precision, torch::kCPU);
                    cache.reset();
                    model->prefill(model->embed(hist, 0), cache);
                    for (int64_t a = 0; a < n; a += Lookahead::kChunk) {

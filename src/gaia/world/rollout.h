@@ -10,6 +10,7 @@
 
 #include <torch/torch.h>
 
+#include "gaia/torch/precision.h"
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
 #include "gaia/world/sampling.h"
@@ -50,6 +51,9 @@ struct RolloutOptions {
   // Sampling's per-token path on raw memory (token_step.h) where it applies; false: the general LibTorch path (the
   // reference of tests and benchmarks).
   bool fused_tokens = true;
+  // The products' precision (--precision): bf16 runs every step, and the lookahead's re-encoding, under autocast;
+  // the fused token step, the cached attention, sampling and the cache stay float32.
+  Precision precision = Precision::kFp32;
 };
 
 struct RolloutResult {

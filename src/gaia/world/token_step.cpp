@@ -110,7 +110,7 @@ const float* f32(const torch::Tensor& t) { return t.data_ptr<float>(); }
 bool TokenStep::applies(const WorldModelImpl& m, int64_t rows) {
   const auto& w = m.token_embedding->weight;
   return rows <= kMaxRows && w.device().is_cpu() && w.scalar_type() == torch::kFloat &&
-         !at::autocast::is_cpu_enabled();
+         (!at::autocast::is_cpu_enabled() || at::autocast::get_autocast_cpu_dtype() == at::kBFloat16);
 }
 
 TokenStep::TokenStep(const WorldModelImpl& m)
