@@ -16,7 +16,7 @@ class TokenStep {
  public:
   // CPU, float32 weights, and few rows (many rows make real matrix products, which LibTorch does well). Under bf16's
   // autocast (--precision bf16) too: the step itself stays float32, as the cached attention does in the general
-  // path; bf16 pays in the window's re-encoding and does not in a single token's products (docs/benchmarks.md).
+  // path (its matrices stored as bf16 gained nothing: docs/benchmarks.md).
   static bool applies(const WorldModelImpl& model, int64_t rows);
   // Copies the weights, matrices packed for the products: as much memory again as the model. Later changes to the model's
   // weights are not seen (make a new TokenStep).
