@@ -12,6 +12,7 @@
 #include "gaia/decoder/evaluate.h"
 #include "gaia/decoder/io.h"
 #include "gaia/tokenizer/io.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "test_util.h"
 
@@ -74,6 +75,14 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("17 frames at 25 Hz"), std::string::npos) << r.output;
   for (auto f : {"video.mp4", "video.gif", "video.png"}) EXPECT_GT(fs::file_size(p.dir / "out" / f), 100u) << f;
+  // --precision bf16: the U-Net under autocast (DecoderVideo.Bf16DecodingStaysNearFloat32); fp32 where the CPU lacks it.
+  r = test::run_shell(test::gaia_command("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() +
+                                         " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                                         " --ddim-steps 2 --precision bf16" + p.tiny() + " --out " +
+                                         q(p.dir / "bf16" / "video.mp4")) + " 2>&1");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("17 frames at 25 Hz"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("running in fp32 instead") != std::string::npos, !cpu_has_bf16()) << r.output;
   // --fast: the tokenizer's decoder, at the token rate.
   r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --fast" + p.tiny() + " --out " +
                      q(p.dir / "fast.mp4"));

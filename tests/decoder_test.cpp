@@ -18,6 +18,7 @@
 #include "gaia/decoder/unet.h"
 #include "gaia/decoder/video.h"
 #include "gaia/sizing/sizing.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/ema.h"
 #include "test_util.h"
@@ -358,6 +359,31 @@ TEST(DecoderVideo, DecodesToTwentyFiveHertzKeepingKnownFrames) {
   // Same seed, same video.
   auto v2 = decode_video(m, sch, tokens, cond, o);
   EXPECT_TRUE(torch::equal(v, v2)) << (v - v2).abs().max().item<float>();
+}
+
+// --precision bf16: the U-Net under bf16's autocast, the norms and the DDIM arithmetic in float32. The video stays
+// near the float32 one (frames in [-1, 1]), differs from it, and is float32 and repeatable.
+TEST(DecoderVideo, Bf16DecodingStaysNearFloat32) {
+  if (!cpu_has_bf16()) GTEST_SKIP() << "this CPU runs --precision bf16 as fp32 (no bf16 instructions)";
+  Config c = tiny();
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  randomize(*m, 7);
+  m->eval();
+  NoiseSchedule sch;
+  auto tokens = torch::randint(0, m->K, {1, 4, 4, 8}, torch::kLong);
+  auto cond = torch::rand({1, 4, 3, 32, 64}) * 2 - 1;
+  DecodeOptions o;
+  o.sample.steps = 3;
+  o.out_fps = 12.5;
+  const auto fp32 = decode_video(m, sch, tokens, cond, o);
+  o.sample.precision = Precision::kBf16;
+  const auto bf16 = decode_video(m, sch, tokens, cond, o);
+  ASSERT_EQ(bf16.sizes(), fp32.sizes());
+  EXPECT_EQ(bf16.scalar_type(), torch::kFloat);
+  const double off = (bf16 - fp32).abs().mean().item<double>();
+  EXPECT_GT(off, 0);
+  EXPECT_LT(off, 0.005) << "mean difference from float32 (frames span 2)";
+  EXPECT_TRUE(torch::equal(decode_video(m, sch, tokens, cond, o), bf16));
 }
 
 TEST(DecoderVideo, BadInputsAreClearErrors) {

@@ -5,6 +5,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
+#include "gaia/torch/precision.h"
 #include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
@@ -135,6 +136,9 @@ void register_decoder(CLI::App& app) {
       decoder::DecoderEvalOptions o = *eo;
       o.steps = parse_steps(*steps);
       o.seed = uint64_t(run.run.seed);
+      o.precision = precision_for(run.run.precision, dev, [](const std::string& n) {
+        std::fprintf(stderr, "decoder eval: %s\n", n.c_str());
+      });
       world::WorldModel wm{nullptr};
       if (!world_path->empty()) {
         world::WorldInfo info;
@@ -208,6 +212,9 @@ void register_decode(CLI::App& app) {
       fail("{}: token ids must be in [0, {}) (the tokenizer's codebook)", *tokens, t->cfg.codebook_size);
     // The tokenizer's decoding of every token frame: the --fast output, and the video decoder's conditioning.
     auto cond = decoder::coarse_frames(t, ids, dev);  // [F, N, 3, H, W]
+    const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
+      std::fprintf(stderr, "decode: %s\n", n.c_str());
+    });
     torch::Tensor video;
     double out_fps = *token_fps;
     if (*fast) {
@@ -219,7 +226,8 @@ void register_decode(CLI::App& app) {
                                           if (!bar) bar = std::make_unique<ProgressBar>(total, "decode", true, d);
                                           bar->update(d);
                                         },
-                                        [&](Config& dc) { apply_sampling_sets(*flags, "decoder", kDecoderSamplingKeys, *weights, dc); });
+                                        [&](Config& dc) { apply_sampling_sets(*flags, "decoder", kDecoderSamplingKeys, *weights, dc); },
+                                        precision);
       if (bar) bar->finish();
       out_fps = *fps;
     }

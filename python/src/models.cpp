@@ -211,8 +211,9 @@ VideoDecoder(path, tokenizer): tokens -> video, as `gaia decode` makes it.)")
         return VideoDecoderHandle{path, tok};
       }), py::arg("path"), py::arg("tokenizer"))
       .def("decode", [](VideoDecoderHandle& v, const py::array& tokens, int ddim_steps, double fps, double token_fps,
-                        uint64_t seed) {
+                        uint64_t seed, const std::string& precision) {
         auto& t = *v.tok;
+        const Precision p = precision_arg(precision, t.dev);
         const int64_t gh = t.tok->height / t.tok->cfg.downsample, gw = t.tok->width / t.tok->cfg.downsample;
         const bool one = tokens.ndim() == 3;
         auto z = view_of(tokens, Kind::kTokens, {{-1, gh, gw}, {-1, -1, gh, gw}}, "tokens").to(torch::kLong);
@@ -224,14 +225,15 @@ VideoDecoder(path, tokenizer): tokens -> video, as `gaia decode` makes it.)")
         {
           py::gil_scoped_release free;
           auto coarse = decoder::coarse_frames(t.tok, z, t.dev);
-          video = decoder::diffusion_decode(t.tok, v.path, z, coarse, ddim_steps, token_fps, fps, seed, t.dev);
+          video = decoder::diffusion_decode(t.tok, v.path, z, coarse, ddim_steps, token_fps, fps, seed, t.dev, {}, {}, p);
         }
         auto rgb = video.clamp(-1, 1).add(1).mul(127.5).round().to(torch::kUInt8).permute({0, 1, 3, 4, 2});
         return array_of(one ? rgb[0] : rgb);
       }, py::arg("tokens"), py::arg("ddim_steps") = 0, py::arg("fps") = 25.0, py::arg("token_fps") = 6.25,
-      py::arg("seed") = 0,
+      py::arg("seed") = 0, py::arg("precision") = "fp32",
       "int16 tokens [N, h, w] (or [F, N, h, w] futures) at token_fps -> RGB uint8 video [M, H, W, 3] (or [F, M, "
-      "H, W, 3]) at fps (6.25, 12.5 or 25: temporal upsampling, §5.2); ddim_steps <= 0: the decoder's own.");
+      "H, W, 3]) at fps (6.25, 12.5 or 25: temporal upsampling, §5.2); ddim_steps <= 0: the decoder's own; "
+      "precision \"bf16\" as `gaia decode --precision bf16`.");
 }
 
 }  // namespace gaia::python

@@ -71,6 +71,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
   DecodeOptions d;
   d.sample = sample_options(cfg.decoder, 0, o.seed);
+  d.sample.precision = o.precision;
   d.token_fps = o.token_fps;
   // The 25 Hz frames that get tokens: every 4th, 2nd or each one.
   const int stride = o.token_fps == 6.25 ? 4 : o.token_fps == 12.5 ? 2 : o.token_fps == 25.0 ? 1 : 0;

@@ -10,6 +10,7 @@
 #include "gaia/config.h"
 #include "gaia/decoder/unet.h"
 #include "gaia/tokenizer/autoencoder.h"
+#include "gaia/torch/precision.h"
 
 namespace gaia::decoder {
 
@@ -46,6 +47,7 @@ struct DecoderEvalOptions {
   // §5.2), 12.5, or 25 (every frame's own tokens, as the tokenizer decoder gets them at 25 Hz).
   double token_fps = 6.25;
   uint64_t seed = 0;
+  Precision precision = Precision::kFp32;  // the video decoder's (SampleOptions::precision); the baselines stay float32
   // Set: both decoders decode generated tokens instead of the true ones (token_fps must be 6.25). PSNR is then
   // against the recorded future, one of many; flicker still compares each decoder's change with the truth's.
   TokenGenerator generate;

@@ -24,7 +24,7 @@ torch::Tensor coarse_frames(tokenizer::ImageTokenizer& tok, const torch::Tensor&
 torch::Tensor diffusion_decode(tokenizer::ImageTokenizer& tok, const fs::path& weights, const torch::Tensor& ids,
                                const torch::Tensor& coarse, int steps, double token_fps, double out_fps, uint64_t seed,
                                const torch::Device& dev, const std::function<void(int, int)>& progress,
-                               const std::function<void(Config&)>& configure) {
+                               const std::function<void(Config&)>& configure, Precision precision) {
   Config dc;
   auto model = load_decoder(weights, dev, &dc);
   if (configure) configure(dc);
@@ -33,6 +33,7 @@ torch::Tensor diffusion_decode(tokenizer::ImageTokenizer& tok, const fs::path& w
          model->K, model->D, tok->cfg.codebook_size, tok->cfg.downsample);
   DecodeOptions o;
   o.sample = sample_options(dc.decoder, steps, seed);
+  o.sample.precision = precision;
   o.token_fps = token_fps;
   o.out_fps = out_fps;
   NoiseSchedule sched{-15.0, 15.0, dc.decoder.schedule_shift};

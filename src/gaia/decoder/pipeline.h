@@ -23,7 +23,8 @@ torch::Tensor coarse_frames(tokenizer::ImageTokenizer& tok, const torch::Tensor&
 torch::Tensor diffusion_decode(tokenizer::ImageTokenizer& tok, const fs::path& weights, const torch::Tensor& ids,
                                const torch::Tensor& coarse, int steps, double token_fps, double out_fps, uint64_t seed,
                                const torch::Device& dev, const std::function<void(int, int)>& progress = {},
-                               const std::function<void(Config&)>& configure = {});
+                               const std::function<void(Config&)>& configure = {},
+                               Precision precision = Precision::kFp32);
 
 // [F, M, 3, H, W] -> M BGR frames with the F futures side by side.
 std::vector<cv::Mat> side_by_side(const torch::Tensor& video);

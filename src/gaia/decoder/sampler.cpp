@@ -84,10 +84,11 @@ torch::Tensor sample_window(VideoUNet& model, const NoiseSchedule& sched, const 
     di.x = ctx * x0 + (1 - ctx) * zt;  // context frames clean, the rest at noise level t
     di.time = (1 - in.context.to(torch::kFloat32)) * float(t);
     di.temporal = in.temporal;
-    auto v = model->forward(di);
+    Autocast autocast(o.precision, x0.device());  // the U-Net's products; the DDIM arithmetic stays float32
+    auto v = model->forward(di).to(torch::kFloat);
     if (in.temporal && o.mix_probability > 0 && mix(rng) && any_tokens) {  // the draw happens either way
       di.temporal = false;  // §5.2: denoise every frame as an image, average with the video prediction
-      v = mix_w * model->forward(di) + (1 - mix_w) * v;
+      v = mix_w * model->forward(di).to(torch::kFloat) + (1 - mix_w) * v;
     }
     return v;
   };
