@@ -34,6 +34,20 @@ WorldBatch random_batch(const Config& c, int64_t B, int64_t T) {
   return b;
 }
 
+// The default world model with random weights (seed 0) for sampling, with a one-row cache of its whole context.
+struct SamplingCase {
+  Config c = bench_config();
+  WorldModel m{nullptr};
+  KVCache cache;
+  SamplingCase() {
+    torch::manual_seed(0);
+    m = WorldModel(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+    m->eval();
+    cache = m->make_cache(1, m->layout.length());
+  }
+  void fill(int64_t positions) { m->body(torch::randn({1, positions, m->d}), &cache); }  // under inference mode
+};
+
 }  // namespace
 
 // Args: batch, precision (0 fp32, 1 bf16 through autocast as `gaia world train --precision bf16`).
@@ -72,14 +86,13 @@ BENCHMARK(BM_WorldTrainStep)->Args({4, 0})->Args({4, 1})->Unit(benchmark::kMilli
 // Where one generated token's time goes (a rollout is n = 144 of these per frame): the transformer body over the
 // cached context (half full), the head's logits, and top-k sampling.
 static void BM_TokenParts(benchmark::State& st) {
-  Config c = bench_config();
-  torch::manual_seed(0);
-  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
-  m->eval();
+  SamplingCase sc;
+  auto& c = sc.c;
+  auto& m = sc.m;
+  auto& cache = sc.cache;
   c10::InferenceMode im;
   const int64_t L = m->layout.length();
-  KVCache cache = m->make_cache(1, L);
-  m->body(torch::randn({1, L / 2, m->d}), &cache);
+  sc.fill(L / 2);
   auto tok = torch::zeros({1, 1, 1}, torch::kLong);
   auto last = torch::randn({1, m->d});
   SamplingOptions so;
@@ -106,19 +119,17 @@ BENCHMARK(BM_TokenParts)->Arg(0)->Arg(3)->Arg(1)->Arg(2)->Unit(benchmark::kMicro
 // The fused token step alone (token_step.h, what a closed-loop frame runs n times on its sampling thread): one
 // token through every block and the head against a cache of T - 1 steps, as after a one-step slide.
 static void BM_TokenStep(benchmark::State& st) {
-  Config c = bench_config();
-  torch::manual_seed(0);
-  WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
-  m->eval();
+  SamplingCase sc;
+  auto& m = sc.m;
+  auto& cache = sc.cache;
   c10::InferenceMode im;
   const int64_t L = m->layout.length(), S = m->layout.per_step();
-  KVCache cache = m->make_cache(1, L);
-  m->body(torch::randn({1, L - S, m->d}), &cache);
+  sc.fill(L - S);
   const TokenStep step(*m);
   auto tok = torch::zeros({1}, torch::kLong);
   for (auto _ : st) {
     cache.length = L - S + 16;  // the text tokens and a few image tokens of the frame in
-    benchmark::DoNotOptimize(step.logits(tok, c.world.context_steps - 1, 0, cache));
+    benchmark::DoNotOptimize(step.logits(tok, sc.c.world.context_steps - 1, 0, cache));
   }
   st.counters["tokens/s"] = benchmark::Counter(double(st.iterations()), benchmark::Counter::kIsRate);
 }
