@@ -5,6 +5,7 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/demo/demo.h"
+#include "gaia/torch/tensor_io.h"
 
 namespace gaia::app {
 
@@ -52,6 +53,9 @@ void register_demo(CLI::App& app) {
     }
     o.seed = uint64_t(c.run.seed);
     o.device = c.run.device;
+    o.precision = precision_for(c.run.precision, parse_device(c.run.device), [](const std::string& n) {
+      std::printf("demo: %s\n", n.c_str());
+    });
     o.command_line = g_command_line;
     auto r = demo::run_demo(o, out, [](const std::string& line) { std::printf("%s\n", line.c_str()); });
     std::printf("read-back: %s\n", r.readback.dump().c_str());

@@ -153,6 +153,7 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
   ro.sampling.temperature = wc.world.temperature;
   ro.sampling.guide_actions_within_top_k = wc.world.guide_actions_within_top_k;
   ro.seed = o.seed;
+  ro.precision = o.precision;
   ProgressBar bar(4 * F, "rollouts");
   int64_t done = 0;
   auto step = [&](int k, int) { bar.update(done + k); };
@@ -254,7 +255,8 @@ DemoResult run_demo(const DemoOptions& o, const fs::path& out, const std::functi
                                        [&](int k, int total) {
                                          if (!dbar) dbar = std::make_unique<ProgressBar>(total, "video decoder", true, k);
                                          dbar->update(k);
-                                       });
+                                       },
+                                       {}, o.precision);
     if (dbar) dbar->finish();
     dec_seconds = seconds_since(t0);
     video("videos/future1_video_decoder.gif", decoder::side_by_side(v), o.fps / 2);

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "gaia/core/fs.h"
+#include "gaia/torch/precision.h"
 
 namespace gaia::demo {
 
@@ -25,6 +26,7 @@ struct DemoOptions {
   double action_guidance = 16.0; // guidance on the steering commands, against the mirrored command (0 = off)
   uint64_t seed = 0;
   std::string device = "cpu";
+  Precision precision = Precision::kFp32;  // --precision: the rollouts' and the video decoder's products
   std::string command_line;      // recorded in the report, so that the page can be remade
 };
 
