@@ -31,7 +31,8 @@ def run(flags):
   server = subprocess.Popen([gaia, "sim", "serve", "--world", os.path.join(root, "models", "world.safetensors"),
                              "--port", str(port)] + extra, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             cwd=root)
-  server.stdout.readline()  # "serving on ..."
+  while "serving on" not in (server.stdout.readline() or "serving on"):  # notes before it (a bf16 fallback) skipped
+    pass
   print(f"server flags: {flags if extra else '(gaia sim defaults)'}")
   try:
     # Sessions start from a full context (7 random prompt frames), so that every step measured slides the window.
