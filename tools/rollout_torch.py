@@ -37,6 +37,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import safetensors_py  # noqa: E402
+from bench_tokenizer_torch import parse_config_yaml  # noqa: E402
 from bench_world_torch import WorldModel, _set_openblas_threads, openblas_core  # noqa: E402
 
 SPEED_SCALE, CURVATURE_SCALE = 10.0, 0.02  # world/batch.h: actions are fed as speed / 10 m/s, curvature / 0.02 1/m
@@ -46,18 +47,10 @@ def load_world(path):
     """The world model and its sampling settings from a gaia world file (its gaia.config metadata)."""
     tensors, meta = safetensors_py.load(path)
     grid = json.loads(meta["gaia.grid"])
-    cfg, world = {}, {}
-    section = None
-    for line in meta["gaia.config"].splitlines():  # the YAML's world section, flat keys only
-        if line and not line.startswith(" "):
-            section = line.rstrip(":")
-        elif section == "world" and ":" in line:
-            key, value = line.strip().split(":", 1)
-            world[key] = value.strip()
-    for key in ("d_model", "n_layers", "n_heads", "context_steps", "text_tokens", "text_dim", "text_vocab",
-                "action_tokens"):
-        cfg[key] = int(world[key])
-    if int(world.get("action_mlp", "0")):
+    world = parse_config_yaml(meta["gaia.config"])["world"]
+    cfg = {key: int(world[key]) for key in ("d_model", "n_layers", "n_heads", "context_steps", "text_tokens",
+                                            "text_dim", "text_vocab", "action_tokens")}
+    if int(world.get("action_mlp", 0)):
         raise ValueError(f"{path}: world.action_mlp is not in the peer")
     model = WorldModel(cfg, grid["h"] * grid["w"], grid["K"]).eval()
     model.load_gaia(tensors, path)

@@ -5,7 +5,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common.h"
-#include "gaia/torch/precision.h"
 #include "gaia/emerging/common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/npy.h"
@@ -136,9 +135,7 @@ void register_decoder(CLI::App& app) {
       decoder::DecoderEvalOptions o = *eo;
       o.steps = parse_steps(*steps);
       o.seed = uint64_t(run.run.seed);
-      o.precision = precision_for(run.run.precision, dev, [](const std::string& n) {
-        std::fprintf(stderr, "decoder eval: %s\n", n.c_str());
-      });
+      o.precision = run_precision(run, dev, "decoder eval");
       world::WorldModel wm{nullptr};
       if (!world_path->empty()) {
         world::WorldInfo info;
@@ -212,9 +209,7 @@ void register_decode(CLI::App& app) {
       fail("{}: token ids must be in [0, {}) (the tokenizer's codebook)", *tokens, t->cfg.codebook_size);
     // The tokenizer's decoding of every token frame: the --fast output, and the video decoder's conditioning.
     auto cond = decoder::coarse_frames(t, ids, dev);  // [F, N, 3, H, W]
-    const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
-      std::fprintf(stderr, "decode: %s\n", n.c_str());
-    });
+    const Precision precision = run_precision(run, dev, "decode");
     torch::Tensor video;
     double out_fps = *token_fps;
     if (*fast) {

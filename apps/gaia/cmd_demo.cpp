@@ -53,9 +53,7 @@ void register_demo(CLI::App& app) {
     }
     o.seed = uint64_t(c.run.seed);
     o.device = c.run.device;
-    o.precision = precision_for(c.run.precision, parse_device(c.run.device), [](const std::string& n) {
-      std::printf("demo: %s\n", n.c_str());
-    });
+    o.precision = run_precision(c, parse_device(c.run.device), "demo");
     o.command_line = g_command_line;
     auto r = demo::run_demo(o, out, [](const std::string& line) { std::printf("%s\n", line.c_str()); });
     std::printf("read-back: %s\n", r.readback.dump().c_str());

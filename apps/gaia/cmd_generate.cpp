@@ -182,9 +182,7 @@ void register_generate(CLI::App& app) {
     o.guidance.frames = world::parse_frame_schedule(g->frame_schedule);
     o.guidance.plateau = g->plateau;
     ProgressBar bar(F, "generate");
-    const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
-      std::fprintf(stderr, "generate: %s\n", n.c_str());
-    });
+    const Precision precision = run_precision(run, dev, "generate");
     o.precision = precision;            // each rollout step (and its lookahead thread) under it
     Autocast autocast(precision, dev);  // run.precision: bf16 / fp16 for the text encoder and the prompt too
     auto r = world::generate(model, info, g->world, req, encoder, [&](int done, int) { bar.update(done); });

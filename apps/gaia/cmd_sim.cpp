@@ -14,7 +14,6 @@
 #include "gaia/sim/hub.h"
 #include "gaia/world/prompt_text.h"
 #include "gaia/sim/server.h"
-#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/io.h"
 #include "gaia/world/token_dataset.h"
@@ -203,9 +202,7 @@ void with_hub(const SimFlags& g, const SharedFlags& flags, const std::function<v
   // A model that reads T5 embeddings takes text only through its T5 (sessions without text need none).
   std::shared_ptr<text::TextEncoder> text;
   if (!info.embeds_text() || !g.t5.empty()) text = world::prompt_encoder(info, g.world, g.t5, dev);
-  const Precision precision = precision_for(run.run.precision, dev, [](const std::string& n) {
-    std::fprintf(stderr, "sim: %s\n", n.c_str());
-  });
+  const Precision precision = run_precision(run, dev, "sim");
   sim::SessionHub hub(model, info, {g.max_sessions, g.max_queue, g.idle_s, precision}, prompts, frames, read_back, text);
   serve(hub);
 }

@@ -213,6 +213,11 @@ void apply_threads(const Config& c) {
   set_torch_threads(c.run.threads);
 }
 
+Precision run_precision(const Config& c, const torch::Device& dev, const std::string& command) {
+  return precision_for(c.run.precision, dev,
+                       [&](const std::string& n) { std::fprintf(stderr, "%s: %s\n", command.c_str(), n.c_str()); });
+}
+
 std::vector<std::string> adopt_init_architecture(Config& c, const fs::path& init, const SharedFlags& f,
                                                  const std::string& section) {
   std::vector<std::string> adopted;

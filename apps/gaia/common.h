@@ -8,6 +8,7 @@
 #include <torch/torch.h>
 
 #include "gaia/config.h"
+#include "gaia/torch/precision.h"
 
 namespace gaia::data {
 struct MotionOptions;
@@ -103,6 +104,10 @@ extern const CLI::Validator kSignedNumber;
 
 // Applies run.threads to the process (OpenCV; LibTorch when linked).
 void apply_threads(const Config& c);
+
+// run.precision (--precision) on `dev` for a sampling command: precision_for, its fallback note a stderr line
+// "COMMAND: ...".
+Precision run_precision(const Config& c, const torch::Device& dev, const std::string& command);
 
 // Runs this gaia binary again as a child process with `args` (after "gaia"), sharing stdout/stderr, and returns
 // its exit status: train-all's stages and demo --from-scratch.

@@ -9,6 +9,13 @@ namespace gaia::decoder {
 
 namespace F = torch::nn::functional;
 
+namespace {
+// A norm (group or layer) of float32 input: under bf16's autocast (--precision bf16) activations may arrive in
+// bf16, and LibTorch's CPU norms take no bf16 input with float32 weights. A no-op cast in float32.
+template <class Norm>
+torch::Tensor normed(Norm& norm, const torch::Tensor& x) { return norm(x.to(torch::kFloat)); }
+}  // namespace
+
 torch::Tensor timestep_embedding(const torch::Tensor& t, int64_t dim) {
   // Transformer-style sinusoids of 1000 t (DDPM convention), half sine and half cosine.
   const int64_t half = dim / 2;
@@ -33,10 +40,9 @@ TimeResBlockImpl::TimeResBlockImpl(int64_t cin, int64_t cout, int64_t emb_dim) {
 }
 
 torch::Tensor TimeResBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& emb) {
-  // The norms take float32: under bf16's autocast (--precision bf16) a bf16 activation meets float32 weights.
-  auto h = conv1(F::silu(norm1(x.to(torch::kFloat))));                   // [N, cout, H, W]
+  auto h = conv1(F::silu(normed(norm1, x)));                             // [N, cout, H, W]
   auto ss = film(F::silu(emb)).unsqueeze(-1).unsqueeze(-1).chunk(2, 1);  // 2 x [N, cout, 1, 1]
-  h = norm2(h.to(torch::kFloat)) * (1 + ss[0]) + ss[1];
+  h = normed(norm2, h) * (1 + ss[0]) + ss[1];
   h = conv2(F::silu(h));
   return (skip ? skip(x) : x) + h;
 }
@@ -57,7 +63,7 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch
 
 torch::Tensor SpatialAttentionImpl::forward(const torch::Tensor& x) {
   const int64_t N = x.size(0), C = x.size(1), H = x.size(2), W = x.size(3), hd = C / heads;
-  auto h = norm(x.to(torch::kFloat)).flatten(2).transpose(1, 2);                          // [N, HW, C]
+  auto h = normed(norm, x).flatten(2).transpose(1, 2);                  // [N, HW, C]
   auto q = qkv(h).view({N, H * W, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, N, heads, HW, hd]
   auto o = proj(attend(q[0], q[1], q[2], {}));                          // [N, HW, C]
   return x + o.transpose(1, 2).reshape({N, C, H, W});
@@ -79,7 +85,7 @@ torch::Tensor TemporalAttentionImpl::forward(const torch::Tensor& x, int64_t T) 
   const int64_t BT = x.size(0), C = x.size(1), H = x.size(2), W = x.size(3), B = BT / T, hd = C / heads;
   // [B*T, C, H, W] -> [B*H*W, T, C]: every position of the frame is a sequence over time.
   auto h = x.view({B, T, C, H * W}).permute({0, 3, 1, 2}).reshape({B * H * W, T, C});
-  auto q = qkv(norm(h.to(torch::kFloat))).view({B * H * W, T, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, BHW, heads, T, hd]
+  auto q = qkv(normed(norm, h)).view({B * H * W, T, 3, heads, hd}).permute({2, 0, 3, 1, 4});  // [3, BHW, heads, T, hd]
   auto pos = torch::arange(T, x.options().dtype(torch::kLong));
   auto rel = (pos.unsqueeze(0) - pos.unsqueeze(1)).clamp(-max_offset, max_offset) + max_offset;  // [T, T]: j - i
   auto bias = rel_bias.index_select(1, rel.flatten()).view({1, heads, T, T});
@@ -210,7 +216,7 @@ torch::Tensor VideoUNetImpl::forward(const DenoiserInput& in) {
     }
     if (i > 0) x = upsamplers[ui++]->as<Upsample>()->forward(x);
   }
-  x = conv_out(F::silu(norm_out(x.to(torch::kFloat))));  // [N, 3, H, W]
+  x = conv_out(F::silu(normed(norm_out, x)));  // [N, 3, H, W]
   return x.view({B, T, 3, H, W});
 }
 
