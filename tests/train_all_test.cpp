@@ -9,6 +9,7 @@
 #include <torch/torch.h>
 
 #include "gaia/core/safetensors.h"
+#include "gaia/torch/tensor_io.h"
 #include "gaia/data/episode.h"
 #include "gaia/data/geofence.h"
 #include "gaia/world/io.h"
@@ -146,6 +147,28 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(count(r.output, "skipped"), 10) << r.output;  // data, synth, five trainers and steps, three copies
+  // Fine-tuning the models just shipped with --new-codes: the tokenizer's encoder and codebook learn too (without
+  // it, --decoder-only keeps every code; a warm-up's first steps move them little, but they move).
+  r = test::run_gaia("train-all --data " + q(d / "mine") + " --from " + q(d / "models") + " --new-codes --synth 1" +
+                     " --seconds 3" + tiny + " --tokenizer-steps 2 --world-steps 1 --decoder-steps 1 --skip-eval --out " +
+                     q(d / "tuned"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("--decoder-only"), std::string::npos) << r.output;
+  {
+    SafetensorsFile before(d / "models" / "tokenizer.safetensors"),
+        after(d / "tuned" / "tokenizer" / "tokenizer.safetensors");
+    int encoder = 0, moved = 0;
+    for (const auto& n : before.names())
+      if (n.rfind("encoder.", 0) == 0 || n.rfind("quantizer.", 0) == 0) {
+        ++encoder;
+        const auto a = tensor_from_view(before.get(n)).to(torch::kFloat), b = tensor_from_view(after.get(n)).to(torch::kFloat);
+        moved += !torch::equal(a, b);  // --decoder-only writes back the shipped fp16 values exactly
+      }
+    EXPECT_GT(encoder, 0);
+    EXPECT_GT(moved, encoder / 2) << moved << " of " << encoder;
+  }
+  r = test::run_gaia("train-all --data " + q(d / "mine") + " --new-codes" + tiny + " --out " + q(d / "x"));
+  EXPECT_NE(r.output.find("--new-codes goes with --from"), std::string::npos) << r.output;
   // Bad input before any stage: not a dataset, another frame size, --from without the models, --synth alone.
   r = test::run_gaia("train-all --data " + q(d / "nope") + tiny + " --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);

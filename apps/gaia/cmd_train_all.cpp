@@ -62,6 +62,7 @@ void register_train_all(CLI::App& app) {
   auto user_data = std::make_shared<std::string>(), from = std::make_shared<std::string>();
   auto manifest = std::make_shared<std::string>();
   auto synth_mix = std::make_shared<int>(0);
+  auto new_codes = std::make_shared<bool>(false);
   // Steps of each stage, each stage one run.
   struct Steps {
     int tokenizer = 0, finetune = 15000, refine = 9000, world = 3000, world_cf = 800, world_cf_rounds = 2, decoder = 1300,
@@ -88,8 +89,11 @@ void register_train_all(CLI::App& app) {
                                     "(with --manifest: default --episodes, plus the wandering and swerving drives)")
       ->check(number_in({0, 1e6}));
   cmd->add_option("--from", *from, "with --data: fine-tune the models in this directory (e.g. models: its "
-                  "tokenizer's decoder only, so the codes stay; world model and decoder from their weights) instead "
+                  "tokenizer's decoder only, so the codes stay, unless --new-codes; world model and decoder from their weights) instead "
                   "of training from nothing; for a user with little data");
+  cmd->add_flag("--new-codes", *new_codes, "with --from: fine-tune the tokenizer's encoder and codebook too, not its "
+                "decoder alone: codes fitted to your frames (the world model and video decoder then learn them from "
+                "their --from weights)");
   cmd->add_option("--ship", *ship, "also write fp16 copies of the final weights into this directory (e.g. models)");
   cmd->add_flag("--skip-eval", *skip_eval, "train only");
   cmd->add_option("--tokenizer-steps", st->tokenizer, "tokenizer steps (0 = config tokenizer.steps)");
@@ -112,6 +116,7 @@ void register_train_all(CLI::App& app) {
     Config c = resolve_config(*flags);  // validates --config / --set before hours of work start
     if (user_data->empty() && (*synth_mix > 0 || !from->empty() || !manifest->empty()))
       fail("--synth, --from and --manifest go with --data DIR");
+    if (*new_codes && from->empty() && manifest->empty()) fail("--new-codes goes with --from (or --manifest)");
     auto synth_given = [synth_opt] { return synth_opt->count() > 0; };
     if (!manifest->empty()) {
       // A folder of clips: the manifest is read (and every value checked) before hours of work start.
@@ -338,10 +343,14 @@ void register_train_all(CLI::App& app) {
         // The decoder alone, without the GAN term: every frame keeps the codes the world model and the video
         // decoder were trained on, so they fit from the first step. Half of each batch real when procedural drives
         // are mixed in.
+        // --new-codes: encoder and codebook too, at twice the rate, so the codes move to the new frames.
         std::vector<std::string> a{"tokenizer", "train", data, "--init", (base / "tokenizer.safetensors").string(),
-                                   "--decoder-only", "--steps", tsteps, "--set", "tokenizer.ema_decay=0.999",
-                                   "--set", "tokenizer.disc_start=1000000", "--set", "tokenizer.lr=1e-4", "--set",
-                                   "tokenizer.warmup_steps=50", "--set", "tokenizer.final_lr=1e-5"};
+                                   "--steps", tsteps, "--set", "tokenizer.ema_decay=0.999", "--set",
+                                   "tokenizer.disc_start=1000000", "--set", "tokenizer.warmup_steps=50"};
+        if (*new_codes)
+          a.insert(a.end(), {"--set", "tokenizer.lr=2e-4", "--set", "tokenizer.final_lr=2e-5"});
+        else
+          a.insert(a.end(), {"--decoder-only", "--set", "tokenizer.lr=1e-4", "--set", "tokenizer.final_lr=1e-5"});
         if (lane > 0) a.insert(a.end(), {"--set", "data.balance_tokenizer=[footage]", "--set", "data.balance_exponent=1"});
         a.insert(a.end(), {"--out", (out / "tokenizer").string()});
         stages.push_back({"tokenizer", with(a), tk});
