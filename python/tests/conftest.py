@@ -5,6 +5,7 @@ import os
 import pathlib
 import shutil
 import subprocess
+import tempfile
 
 import numpy as np
 import pytest
@@ -42,12 +43,36 @@ def models():
     return MODELS
 
 
+def shared_fixture(name, inputs, build):
+    """A directory made once for every pytest process of a build (ctest runs two at once), as the C++ tests'
+    test::shared_fixture: under the build's test-fixtures/, behind a lock, made again when an input file changes."""
+    import fcntl
+    root = pathlib.Path(os.environ["GAIA_BUILD_DIR"]) / "test-fixtures" if os.environ.get("GAIA_BUILD_DIR") else None
+    if root is None:  # run by hand without a build directory: a fresh one for this process
+        d = pathlib.Path(tempfile.mkdtemp(prefix=name))
+        build(d)
+        return d
+    root.mkdir(parents=True, exist_ok=True)
+    d, stamp = root / name, root / name / ".built-for"
+    key = " ".join(f"{os.stat(f).st_mtime_ns}.{os.stat(f).st_size}" for f in inputs)
+    with open(root / (name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released as the file closes
+        if stamp.exists() and stamp.read_text() == key:
+            return d
+        shutil.rmtree(d, ignore_errors=True)
+        d.mkdir()
+        build(d)
+        stamp.write_text(key)
+    return d
+
+
 @pytest.fixture(scope="session")
-def drive(tmp_path_factory, models):
+def drive(models):
     """An 8-second procedural drive (episodes) and its tokens through the shipped tokenizer."""
-    d = tmp_path_factory.mktemp("drive")
-    run_gaia("synth", "--episodes", "1", "--seconds", "8", "--scene", "bend", "--seed", "3", "--out", d / "ds")
-    run_gaia("tokenize", d / "ds", "--tokenizer", models / "tokenizer.safetensors", "--out", d / "tokens")
+    def build(d):
+        run_gaia("synth", "--episodes", "1", "--seconds", "8", "--scene", "bend", "--seed", "3", "--out", d / "ds")
+        run_gaia("tokenize", d / "ds", "--tokenizer", models / "tokenizer.safetensors", "--out", d / "tokens")
+    d = shared_fixture("python-drive", [BINARY, models / "tokenizer.safetensors"] if BINARY else [], build)
     return {"episodes": d / "ds", "tokens": d / "tokens", "dir": d}
 
 

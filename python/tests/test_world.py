@@ -6,8 +6,8 @@ import gaia
 from conftest import read_rollout, run_gaia
 
 
-def test_rollout_gives_the_tokens_of_gaia_generate(world, drive, models):
-    out = drive["dir"] / "gen"
+def test_rollout_gives_the_tokens_of_gaia_generate(world, drive, models, tmp_path):
+    out = tmp_path / "gen"
     run_gaia("generate", drive["tokens"], "--world", models / "world.safetensors", "--episode", "0", "--start", "3",
              "--prompt-frames", "2", "--frames", "3", "--futures", "2", "--steer", "strong-left", "--guidance", "4",
              "--seed", "5", "--out", out)
@@ -25,8 +25,8 @@ def test_rollout_gives_the_tokens_of_gaia_generate(world, drive, models):
                                                 guidance=4, frames=3, futures=2, seed=5), expected)
 
 
-def test_rollout_at_bf16_gives_the_tokens_of_gaia_generate_at_bf16(world, drive, models):
-    out = drive["dir"] / "gen-bf16"
+def test_rollout_at_bf16_gives_the_tokens_of_gaia_generate_at_bf16(world, drive, models, tmp_path):
+    out = tmp_path / "gen-bf16"
     run_gaia("generate", drive["tokens"], "--world", models / "world.safetensors", "--episode", "0", "--start", "3",
              "--prompt-frames", "2", "--frames", "3", "--steer", "left", "--seed", "5", "--precision", "bf16",
              "--out", out)
