@@ -16,6 +16,7 @@
 #include "gaia/data/mirror.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/sizing/sizing.h"
+#include "gaia/tokenizer/augment.h"
 #include "gaia/tokenizer/evaluate.h"
 #include "gaia/tokenizer/io.h"
 #include "gaia/tokenizer/tokenize.h"
@@ -489,4 +490,33 @@ TEST(TokenizerTrain, TokenizeMirrorAddsMirrorImagesThatSteerTheOtherWay) {
   EXPECT_EQ(again.episodes_skipped, 4);
   EXPECT_EQ(again.episodes_written, 0);
   EXPECT_THROW(tokenizer::tokenize_dataset(dir / "ds", w, dir / "tok", 6.25, torch::kCPU), Error);
+}
+
+// Darkening (tokenizer.augment_dark): a share of the frames, never brighter, drawn from torch's generator so that a
+// seeded step repeats; share 0 leaves the batch as it is.
+TEST(TokenizerAugment, DarkensAShareOfTheFramesAndNeverBrightens) {
+  torch::manual_seed(3);
+  auto x = torch::rand({400, 3, 8, 8}) * 2 - 1;
+  EXPECT_TRUE(torch::equal(tokenizer::darken_some(x, 0.0), x));
+  torch::manual_seed(5);
+  auto y = tokenizer::darken_some(x, 0.25);
+  torch::manual_seed(5);
+  EXPECT_TRUE(torch::equal(tokenizer::darken_some(x, 0.25), y));  // the same draws
+  EXPECT_TRUE((y <= x + 1e-6).all().item<bool>());
+  EXPECT_GE(y.min().item<float>(), -1.0f);
+  const auto changed = (y - x).abs().amax({1, 2, 3}) > 1e-6;  // [400]
+  const double share = changed.to(torch::kFloat).mean().item<double>();
+  EXPECT_NEAR(share, 0.25, 0.07);  // 400 draws: 3 standard deviations
+  // A changed frame is gain * v^gamma with gamma in [1, 3], gain in [0.2, 1]: between the darkest and the lightest.
+  auto v = (x + 1) / 2, w = (y + 1) / 2;
+  auto m = changed.view({-1, 1, 1, 1}).expand_as(v);
+  EXPECT_TRUE((w.masked_select(m) >= (0.2 * v.pow(3)).masked_select(m) - 1e-5).all().item<bool>());
+  // Mid-grey darkens more, relatively, than a light: the lights of a night scene stay lights.
+  auto flat = torch::full({200, 3, 2, 2}, 0.0);  // v = 0.5
+  flat.slice(2, 0, 1).fill_(0.9);                // top row v = 0.95
+  torch::manual_seed(7);
+  auto d = (tokenizer::darken_some(flat, 1.0) + 1) / 2;
+  auto top = d.select(2, 0).mean({1, 2}), bottom = d.select(2, 1).mean({1, 2});
+  EXPECT_TRUE((top / 0.95 >= bottom / 0.5 - 1e-5).all().item<bool>());
+  EXPECT_NEAR(bottom.mean().item<double>(), 0.6 * 0.375 / (2 * std::log(2.0)), 0.02);  // E[gain] E[0.5^gamma]
 }

@@ -347,8 +347,9 @@ void register_train_all(CLI::App& app) {
         std::vector<std::string> a{"tokenizer", "train", data, "--init", (base / "tokenizer.safetensors").string(),
                                    "--steps", tsteps, "--set", "tokenizer.ema_decay=0.999", "--set",
                                    "tokenizer.disc_start=1000000", "--set", "tokenizer.warmup_steps=50"};
-        if (*new_codes)
-          a.insert(a.end(), {"--set", "tokenizer.lr=2e-4", "--set", "tokenizer.final_lr=2e-5"});
+        if (*new_codes)  // a quarter of each batch darkened: codes for nights darker than the drives (augment.h)
+          a.insert(a.end(), {"--set", "tokenizer.lr=2e-4", "--set", "tokenizer.final_lr=2e-5", "--set",
+                             "tokenizer.augment_dark=0.25"});
         else
           a.insert(a.end(), {"--decoder-only", "--set", "tokenizer.lr=1e-4", "--set", "tokenizer.final_lr=1e-5"});
         if (lane > 0) a.insert(a.end(), {"--set", "data.balance_tokenizer=[footage]", "--set", "data.balance_exponent=1"});

@@ -33,6 +33,7 @@ void add_config_fields(TokenizerConfig& t, std::vector<ConfigField>& f) {
   f.push_back(config_field("tokenizer.steps", &t.steps, T, kStepsRange));
   f.push_back(config_field("tokenizer.batch_size", &t.batch_size, T, kBatchRange));
   f.push_back(config_field("tokenizer.ema_decay", &t.ema_decay, T, kDecayRange));
+  f.push_back(config_field("tokenizer.augment_dark", &t.augment_dark, T, closed(0, 1)));
 }
 
 }  // namespace gaia

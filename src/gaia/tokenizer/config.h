@@ -41,6 +41,9 @@ struct TokenizerConfig {
   // with the average and encodes with the trained encoder and codebook, so the codes are those of training; at the
   // end of a fine-tune the average is a better decoder of them than the last noisy step (batch 8 on a CPU).
   double ema_decay = 0;
+  // Share of each training batch darkened (tokenizer/augment.h; not in the paper, 0 = off): codes for nights darker
+  // than the training drives.
+  double augment_dark = 0;
 };
 
 // The section's keys ("tokenizer.downsample", ...) with their roles and ranges, appended to `out`.

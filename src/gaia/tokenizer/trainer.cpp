@@ -13,6 +13,7 @@
 #include "gaia/data/geofence.h"
 #include "gaia/eval/metrics.h"
 #include "gaia/sizing/sizing.h"
+#include "gaia/tokenizer/augment.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/tokenizer/discriminator.h"
 #include "gaia/tokenizer/io.h"
@@ -241,7 +242,8 @@ TrainResult train_tokenizer(const Config& cfg, const TrainOptions& opt, const st
       const int64_t b0 = opt.parallel.micro_offset(tc.batch_size, k);
       if (accumulate > 1 || dist.size() > 1)
         torch::manual_seed(train::step_seed(cfg.run.seed, step, 1 + opt.parallel.micro_stream(k)));
-      x = batch_tensor(train, std::vector<std::pair<size_t, int64_t>>(picks.begin() + b0, picks.begin() + b0 + micro), dev);
+      x = darken_some(batch_tensor(train, std::vector<std::pair<size_t, int64_t>>(picks.begin() + b0, picks.begin() + b0 + micro), dev),
+                      tc.augment_dark);
       std::optional<Autocast> autocast(std::in_place, precision, dev);  // the forward passes; backward after it
       auto o = model->forward(x);
       auto l1 = (o.reconstruction - x).abs().mean();
