@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <sstream>
 
 #include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
@@ -408,6 +409,47 @@ TEST(WorldCli, DistilsOnlyProceduralWindowsWhenAsked) {
 // gaia world calibrate: the fitted world.copy_bias is stored with the model, lowers the cross-entropy of the
 // training windows it was fitted on, and a second calibration of the result finds the same value (the fit starts
 // from the model's own bias). Bad flags are one error line with nothing written.
+// Calibration in the recipe: each validation fits the copy bias on training windows, scores the held-out ones with
+// it, and the weights written carry it, so `world eval` of them reads the trainer's own figure; --no-calibrate
+// writes the paper's model (bias 0) and reports no bias.
+TEST(WorldCli, ValidationCalibratesTheCopyBiasItWrites) {
+  auto& p = Pipeline::get();
+  auto last_val = [](const fs::path& run) {
+    nlohmann::json v;
+    std::istringstream in(read_file(run / "metrics.jsonl"));
+    for (std::string line; std::getline(in, line);)
+      if (auto j = nlohmann::json::parse(line); j.contains("val") && !j["val"].is_null() && !j["val"].empty()) v = j["val"];
+    return v;
+  };
+  auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 4 --val-every 4 --out " + q(p.dir / "cal-run"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("copy bias"), std::string::npos) << r.output;  // in the validation line
+  const auto v = last_val(p.dir / "cal-run");
+  ASSERT_TRUE(v.contains("copy_bias")) << v.dump();
+  const double bias = v["copy_bias"].get<double>();
+  EXPECT_NE(bias, 0.0);
+  EXPECT_NE(v["bits_per_token"].get<double>(), v["bits_per_token_uncalibrated"].get<double>());
+  for (const char* f : {"world.safetensors", "best.safetensors", "latest.safetensors"}) {
+    world::WorldInfo info;
+    world::load_world(p.dir / "cal-run" / f, torch::kCPU, &info);
+    EXPECT_DOUBLE_EQ(info.config.world.copy_bias, bias) << f;
+  }
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.dir / "cal-run" / "world.safetensors") + p.tiny() +
+                     " --max-windows 64 --out " + q(p.dir / "cal-eval"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto e = nlohmann::json::parse(read_file(p.dir / "cal-eval" / "eval.json"));
+  EXPECT_NEAR(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token"].get<double>(), 1e-6);
+  r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 4 --val-every 4 --no-calibrate --out " +
+                     q(p.dir / "uncal-run"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto u = last_val(p.dir / "uncal-run");
+  EXPECT_FALSE(u.contains("copy_bias")) << u.dump();
+  EXPECT_DOUBLE_EQ(u["bits_per_token"].get<double>(), v["bits_per_token_uncalibrated"].get<double>());  // same run
+  world::WorldInfo info;
+  world::load_world(p.dir / "uncal-run" / "world.safetensors", torch::kCPU, &info);
+  EXPECT_EQ(info.config.world.copy_bias, 0.0);
+}
+
 TEST(WorldCli, CalibrateFitsAndStoresTheCopyBias) {
   auto& p = Pipeline::get();
   auto parse = [](const std::string& out, const std::string& after) {

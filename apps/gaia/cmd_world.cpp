@@ -53,7 +53,10 @@ void register_world(CLI::App& app) {
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init,
                     "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
-                    "not carried over: run gaia world calibrate again afterwards)");
+                    "not carried over: each validation fits it again)");
+    cmd->add_flag("--no-calibrate", [o](int64_t) { o->calibrate = false; },
+                  "do not fit world.copy_bias at each validation (on as many training windows as it scores held-out ones) "
+                  "nor write it with the weights: the paper's model, bias 0 (or the config's)");
     cmd->add_option("--train-only", o->train_only,
                     "train only the parameters whose names start with these (comma-separated, e.g. "
                     "speed_mlp,curvature_mlp); the rest stay as --init gave them")
@@ -116,8 +119,12 @@ void register_world(CLI::App& app) {
             std::string info = fmt::format("loss {:.3f} {:.0f} tok/s", l.loss, l.tokens_per_s);
             if (l.distill >= 0) info += fmt::format(" kl {:.4f}", l.distill);
             if (l.distill_other >= 0) info += fmt::format(" / {:.4f}", l.distill_other);
-            if (l.validation && !l.val.empty())
+            if (l.validation && !l.val.empty()) {
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
+              if (l.val.contains("copy_bias"))  // calibrated in the recipe: the bias and what it gained
+                info += fmt::format(" (copy bias {:.2f}; {:.3f} without)", l.val["copy_bias"].get<double>(),
+                                    l.val["bits_per_token_uncalibrated"].get<double>());
+            }
             bar->update(l.step, info);
           },
           [](const std::string& n) { std::fprintf(stderr, "world: %s\n", n.c_str()); });

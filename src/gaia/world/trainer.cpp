@@ -18,6 +18,7 @@
 #include "gaia/train/parallel_adamw.h"
 #include "gaia/train/schedule.h"
 #include "gaia/train/step_loop.h"
+#include "gaia/world/calibrate.h"
 #include "gaia/world/distill.h"
 #include "gaia/world/evaluate.h"
 #include "gaia/world/io.h"
@@ -127,6 +128,8 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
+  const auto calibration_windows =
+      opt.calibrate && !val_windows.empty() ? validation_windows(ds, train_eps, T, opt.val_windows) : std::vector<Window>{};
 
   torch::manual_seed(cfg.run.seed);
   WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
@@ -216,11 +219,18 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   if (main) fs::create_directories(opt.out);
   train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
                        opt.stop_after);
+  // The copy bias of the last validation (opt.calibrate), written with every weights file; training runs without it.
+  double fitted_copy_bias = wc.copy_bias;
+  auto save_calibrated = [&](const fs::path& path) {
+    model->cfg.copy_bias = info.config.world.copy_bias = fitted_copy_bias;
+    save_world(model, info, path);
+    model->cfg.copy_bias = info.config.world.copy_bias = wc.copy_bias;
+  };
   auto save = [&]() {
     auto& state = optim.gathered();  // every rank: a sharded state comes together on rank 0
     if (main) {
       train::save_checkpoint(ckpt, {{"world", model.ptr().get()}}, {{"world", &state}}, {step, {{"config", cfg.name}}});
-      save_world(model, info, opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
+      save_calibrated(opt.out / "latest.safetensors");  // usable weights so far (gaia world eval, generate)
     }
     optim.release();
   };
@@ -238,7 +248,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     const double b = v["bits_per_token"].get<double>();
     if (!(b < best_bits)) return;
     best_bits = b;
-    save_world(model, info, opt.out / "best.safetensors");  // weights first: best.json never names weights not there
+    save_calibrated(opt.out / "best.safetensors");  // weights first: best.json never names weights not there
     write_file_atomic(best_json, nlohmann::json({{"step", step}, {"bits_per_token", b}}).dump(2) + "\n");
     result.best_step = step;
   };
@@ -254,6 +264,17 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
       v[name] = s.nats;
     }
     v["bits_per_token"] = v["action"].get<double>() / std::log(2.0);
+    if (!calibration_windows.empty()) {
+      const auto c = calibrate_copy_bias(model, ds, calibration_windows, text, ConditioningMix::from(wc), wc.batch_size);
+      fitted_copy_bias = c.bias;
+      model->cfg.copy_bias = c.bias;
+      ScoreOptions so;
+      so.batch = wc.batch_size;
+      v["bits_per_token_uncalibrated"] = v["bits_per_token"];
+      v["bits_per_token"] = score(model, ds, val_windows, text, so).bits();
+      v["copy_bias"] = c.bias;
+      model->cfg.copy_bias = wc.copy_bias;
+    }
     model->train();
     return v;
   };
@@ -379,7 +400,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
                      cfg.run.precision, settings.fused_attention ? "fused" : "unfused"));
   }
   if (main && fs::exists(best_json)) result.best_step = read_json(best_json).value("step", -1);
-  if (main && step >= total) save_world(model, info, opt.out / "world.safetensors");
+  if (main && step >= total) save_calibrated(opt.out / "world.safetensors");
   return result;
 }
 

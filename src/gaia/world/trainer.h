@@ -31,6 +31,10 @@ struct WorldTrainOptions {
   int steps = -1;             // -1: config world.steps
   int val_every = 250;
   size_t val_windows = 64;    // held-out windows scored at each validation
+  // Copy calibration in the recipe (world/calibrate.h): at each validation world.copy_bias is fitted on as many
+  // training windows, the held-out windows are scored with it (bits_per_token; bits_per_token_uncalibrated beside
+  // it), and the weights written (latest, best, final) carry it. Training itself runs with the config's copy_bias.
+  bool calibrate = true;
   int stop_after = -1;        // stop (with a checkpoint) after this many steps of this run
   // Train only the parameters whose names start with one of these (e.g. "curvature_mlp"); empty = all. The rest
   // stay as --init gave them: a fine-tune of the action embedding leaves text-only and unconditional outputs as
