@@ -226,6 +226,9 @@ void register_world(CLI::App& app) {
       auto c = world::calibrate_copy_bias(model, ds, windows, text, world::ConditioningMix::from(info.config.world),
                                           info.config.world.batch_size, [&](int64_t d, int64_t) { bar.update(d); });
       bar.finish();
+      if (!c.fitted)
+        fail("{}: {} of the {} tokens with a previous frame in view were copied from it: the copy bias has no finite "
+             "optimum", *tokens, c.copy_rate > 0 ? "all" : "none", c.tokens);
       const double was = info.config.world.copy_bias;
       info.config.world.copy_bias = c.bias;
       model->cfg.copy_bias = c.bias;

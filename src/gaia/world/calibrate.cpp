@@ -55,9 +55,10 @@ CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, c
   // Under b0 the model already had its own bias: remove it to get p0, then fit the total.
   auto a0 = log_p_with_bias(a, -b0);
   CopyCalibration c;
-  c.bias = fit_copy_bias(a0, y);
   c.tokens = y.numel();
   c.copy_rate = y.mean().item<double>();
+  c.fitted = c.copy_rate > 0 && c.copy_rate < 1;
+  c.bias = c.fitted ? fit_copy_bias(a0, y) : b0;
   c.predicted_before = a.exp().mean().item<double>();
   // Moving the bias by d renormalises every code by Z = 1 - p(copy) + p(copy) e^d and raises the copied code by d:
   // log p'(x) = log p(x) + d [x = copy] - log Z.

@@ -21,7 +21,8 @@ namespace gaia::world {
 double fit_copy_bias(const torch::Tensor& log_p_copy, const torch::Tensor& copied);
 
 struct CopyCalibration {
-  double bias = 0;                   // fitted world.copy_bias
+  bool fitted = true;                // false where no token or every token was copied: no finite optimum, bias kept
+  double bias = 0;                   // fitted world.copy_bias (the model's own where not fitted)
   int64_t tokens = 0;                // image tokens with a previous frame in view, over all windows
   double copy_rate = 0;              // fraction of them equal to the previous frame's code (the data)
   double predicted_before = 0;       // mean probability the model gave that code, with the bias it had

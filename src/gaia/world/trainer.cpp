@@ -128,7 +128,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
-  const auto calibration_windows =
+  auto calibration_windows =
       opt.calibrate && !val_windows.empty() ? validation_windows(ds, train_eps, T, opt.val_windows) : std::vector<Window>{};
 
   torch::manual_seed(cfg.run.seed);
@@ -266,6 +266,13 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     v["bits_per_token"] = v["action"].get<double>() / std::log(2.0);
     if (!calibration_windows.empty()) {
       const auto c = calibrate_copy_bias(model, ds, calibration_windows, text, ConditioningMix::from(wc), wc.batch_size);
+      if (!c.fitted) {  // tokens that never (or always) repeat a frame's: nothing to fit, now or later
+        note(fmt::format("copy calibration off: {} of the training tokens with a previous frame in view repeat it",
+                         c.copy_rate > 0 ? "all" : "none"));
+        calibration_windows.clear();
+        model->train();
+        return v;
+      }
       fitted_copy_bias = c.bias;
       model->cfg.copy_bias = c.bias;
       ScoreOptions so;
