@@ -78,6 +78,7 @@ void train_run(const Config& c, const ScalingOptions& o, ScalingRun& r, const st
   t.steps = r.steps;
   t.val_every = r.steps;  // one validation, at the end: the run's final loss
   t.val_windows = o.val_windows;
+  t.calibrate = false;  // the law is of the model's own cross-entropy (§6), as the paper fits it
   auto res = train_world(scaling_config(c, r), t, [&](const WorldStepLog& l) { if (on_step) on_step(l.step, l.total); },
                          on_note);
   if (!res.last_val.contains("action"))
