@@ -201,7 +201,7 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
                     "a.avi,clear,day,city,one/a,Berlin\nb.avi,clear,day,city,two/b,Paris\nc.avi,rain,night,rural,three/c,Rome\n");
   const std::string release = "train-all --data " + q(d / "clips") + " --manifest clips.csv --from " + q(d / "models") +
                               " --synth 3 --wander-episodes 0 --swerve-episodes 0 --seconds 3 --world-cf-steps 0" + tiny +
-                              " --tokenizer-steps 3 --world-steps 2 --decoder-steps 2 --realism-probe-steps 2 --skip-eval"
+                              " --tokenizer-steps 3 --world-steps 2 --realism-probe-steps 2 --skip-eval"
                               " --ship " + q(d / "release") + " --out " + q(d / "real");
   r = test::run_gaia(release);
   ASSERT_EQ(r.status, 0) << r.output;
@@ -218,6 +218,9 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
   EXPECT_NE(commands.find("--distill-procedural-only"), std::string::npos) << commands;
   EXPECT_NE(commands.find("data.balance_tokenizer=[footage]"), std::string::npos) << commands;
   EXPECT_NE(commands.find("--hold-out-by source_repo,place"), std::string::npos) << commands;
+  // The codes stayed, so the video decoder is the --from one, kept byte for byte rather than trained again.
+  EXPECT_EQ(commands.find("decoder train"), std::string::npos) << commands;
+  EXPECT_EQ(read_file(d / "real" / "decoder" / "decoder.safetensors"), read_file(d / "models" / "decoder.safetensors"));
   // A manifest with a value it may not hold: one line before any stage, nothing made.
   write_file_atomic(d / "clips" / "bad.csv", "file,weather\na.avi,sunny\n");
   r = test::run_gaia("train-all --data " + q(d / "clips") + " --manifest bad.csv" + tiny + " --out " + q(d / "y"));

@@ -107,7 +107,10 @@ void register_train_all(CLI::App& app) {
   cmd->add_option("--world-cf-rounds", st->world_cf_rounds,
                   "rounds of that fine-tune, each from the last one's weights with a fresh warm-up, all held to the "
                   "first phase's predictions (recipe: 2, as the shipped model was made)");
-  cmd->add_option("--decoder-steps", st->decoder, "video decoder steps");
+  auto* decoder_opt = cmd->add_option("--decoder-steps", st->decoder,
+                                      "video decoder steps (recipe: 1300; with --from: the --from decoder kept as it is "
+                                      "(0 steps) while the codes stay, 300 fine-tune steps with --new-codes)")
+                          ->check(number_in({0, 1e9}));
   cmd->add_option("--probe-steps", st->probe_scene, "scene probe steps");
   cmd->add_option("--dynamics-probe-steps", st->probe_dynamics, "dynamics probe steps");
   cmd->add_option("--realism-probe-steps", st->probe_realism, "realism probe steps (with --data and procedural drives)");
@@ -377,10 +380,22 @@ void register_train_all(CLI::App& app) {
       if (lane > 0) ca.insert(ca.end(), {"--without-meta", "synth_wander", "--without-meta", "replay_of"});
       ca.insert(ca.end(), {"--out", world});
       stages.push_back({"world-calibrate", with(ca), world});
-      std::vector<std::string> da{"decoder", "train", data, "--tokenizer", tk, "--steps", std::to_string(st->decoder)};
-      if (!base.empty()) da.insert(da.end(), {"--init", (base / "decoder.safetensors").string()});
-      da.insert(da.end(), {"--out", (out / "decoder").string()});
-      stages.push_back({"decoder", with(da), decoder});
+      // From --from weights the decoder needs only what the codes changed: nothing while they stay (its weights are
+      // kept), a short fine-tune when they moved.
+      const int dsteps = base.empty() || decoder_opt->count() > 0 ? st->decoder : *new_codes ? 300 : 0;
+      if (dsteps > 0) {
+        std::vector<std::string> da{"decoder", "train", data, "--tokenizer", tk, "--steps", std::to_string(dsteps)};
+        if (!base.empty()) da.insert(da.end(), {"--init", (base / "decoder.safetensors").string()});
+        da.insert(da.end(), {"--out", (out / "decoder").string()});
+        stages.push_back({"decoder", with(da), decoder});
+      } else {
+        const fs::path kept = base / "decoder.safetensors";
+        stages.push_back({"decoder", {"(keep " + kept.string() + " as " + decoder + ")"}, decoder, false, [kept, decoder] {
+                            fs::create_directories(fs::path(decoder).parent_path());
+                            fs::copy_file(kept, decoder + ".part", fs::copy_options::overwrite_existing);
+                            fs::rename(decoder + ".part", decoder);
+                          }});
+      }
       const std::string realism = (out / "probe-realism" / "probe-realism.safetensors").string();
       // Real or procedural: what reads whether futures of a real prompt stay real (where the drives are recorded).
       bool recorded = clips;
