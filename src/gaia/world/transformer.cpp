@@ -51,42 +51,46 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torc
 }
 
 // The two inner loops of one query's attention (torch/simd.h: also compiled for AVX2).
-constexpr int64_t kLanes = kSimdLanes;
 
 // out[j] = scale * q . k_j for j < Lk, keys transposed (KT row e holds component e of every key, row stride `cap`):
-// 64 keys at a time are scored in registers, one broadcast multiply-add per component over contiguous keys (no
-// horizontal sums, so it vectorises without reordering float additions).
+// four components at a time, each a contiguous row streamed over every key into `out` (a few KB, held in L1), so
+// memory is read as four sequential streams, not hd strided ones. Each key still sums its components in order.
 GAIA_SIMD_CLONES void score_keys(const float* q, const float* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
-                                 float* out) {
-  int64_t j0 = 0;
-  for (; j0 + kLanes <= Lk; j0 += kLanes) {
-    float acc[kLanes] = {};
-    for (int64_t e = 0; e < hd; ++e) {
-      const float qe = q[e] * scale;
-      const float* row = KT + e * cap + j0;
-      for (int64_t j = 0; j < kLanes; ++j) acc[j] += qe * row[j];
-    }
-    std::copy(acc, acc + kLanes, out + j0);
+                                 float* __restrict out) {
+  std::fill(out, out + Lk, 0.0f);
+  int64_t e = 0;
+  for (; e + 4 <= hd; e += 4) {
+    const float q0 = q[e] * scale, q1 = q[e + 1] * scale, q2 = q[e + 2] * scale, q3 = q[e + 3] * scale;
+    const float* __restrict r0 = KT + e * cap;
+    const float *__restrict r1 = r0 + cap, *__restrict r2 = r1 + cap, *__restrict r3 = r2 + cap;
+    for (int64_t j = 0; j < Lk; ++j) out[j] = (((out[j] + q0 * r0[j]) + q1 * r1[j]) + q2 * r2[j]) + q3 * r3[j];
   }
-  for (; j0 < Lk; ++j0) {
-    float a = 0;
-    for (int64_t e = 0; e < hd; ++e) a += q[e] * scale * KT[e * cap + j0];
-    out[j0] = a;
+  for (; e < hd; ++e) {
+    const float qe = q[e] * scale;
+    const float* __restrict r = KT + e * cap;
+    for (int64_t j = 0; j < Lk; ++j) out[j] += qe * r[j];
   }
 }
 
-// y = sum_j p[j] V[j] over Lk rows of hd floats, 32 components at a time in registers.
+// y = sum_j p[j] V[j] over Lk rows of hd floats, 32 components at a time in registers, even and odd rows in two
+// sets of sums (one chain of dependent multiply-adds would wait on each one's latency).
 GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, int64_t hd, float* y) {
   constexpr int64_t kE = 32;
   int64_t e0 = 0;
   for (; e0 + kE <= hd; e0 += kE) {
-    float acc[kE] = {};
-    for (int64_t j = 0; j < Lk; ++j) {
-      const float w = p[j];
-      const float* v = V + j * hd + e0;
-      for (int64_t e = 0; e < kE; ++e) acc[e] += w * v[e];
+    float even[kE] = {}, odd[kE] = {};
+    int64_t j = 0;
+    for (; j + 2 <= Lk; j += 2) {
+      const float w0 = p[j], w1 = p[j + 1];
+      const float *v0 = V + j * hd + e0, *v1 = v0 + hd;
+      for (int64_t e = 0; e < kE; ++e) {
+        even[e] += w0 * v0[e];
+        odd[e] += w1 * v1[e];
+      }
     }
-    std::copy(acc, acc + kE, y + e0);
+    if (j < Lk)
+      for (int64_t e = 0; e < kE; ++e) even[e] += p[j] * V[j * hd + e0 + e];
+    for (int64_t e = 0; e < kE; ++e) y[e0 + e] = even[e] + odd[e];
   }
   for (; e0 < hd; ++e0) {
     float a = 0;
