@@ -2,8 +2,8 @@
 # The figures of models/MODEL_CARD.md for a candidate release beside the shipped one, on the candidate's held-out
 # split: a run of `gaia train-all --data CLIPS --manifest FILE` (its data/, tokenizer/, tokens/, world-calibrated/,
 # probe-realism/). Each world model is scored on tokens of its own tokenizer (a release with new codes has its own):
-# the shipped models' tokens of the same data are made first (RUN/tokens-shipped). Every step skips what its output
-# already holds, so a killed run picks up where it stopped.
+# the shipped models' tokens of the same data are made (RUN/tokens-shipped) after the candidate's figures. Every step
+# skips what its output already holds, so a killed run picks up where it stopped.
 #
 #   tools/release-figures.sh RUN OUT [GAIA_BINARY]
 # Knobs (environment): THREADS (2), SEED (2), MODELS (the repository's models/).
@@ -28,10 +28,10 @@ declare -A TOK=([new]="$RUN/tokenizer/tokenizer.safetensors" [shipped]="$MODELS/
 declare -A WORLD=([new]="$RUN/world-calibrated/world.safetensors" [shipped]="$MODELS/world.safetensors")
 declare -A REALISM=([new]="$RUN/probe-realism/probe-realism.safetensors" [shipped]="$MODELS/probe-realism.safetensors")
 declare -A TOKENS=([new]="$RUN/tokens" [shipped]="$RUN/tokens-shipped")
-step "$RUN/tokens-shipped/dataset.json" "$GAIA" tokenize "$RUN/data" --tokenizer "${TOK[shipped]}" --mirror "${T[@]}" \
-  --out "$RUN/tokens-shipped"
-
+# The candidate's figures first: they decide whether it ships.
 for m in new shipped; do
+  [ "$m" = shipped ] && step "$RUN/tokens-shipped/dataset.json" "$GAIA" tokenize "$RUN/data" --tokenizer "${TOK[shipped]}" \
+    --mirror "${T[@]}" --out "$RUN/tokens-shipped"
   # Tokenizer: held-out real clips (median and worst clip, per clip and condition) and procedural drives.
   step "$OUT/$m-tokenizer.json" "$GAIA" tokenizer eval "$RUN/data" --tokenizer "${TOK[$m]}" --max-frames 1024 "${T[@]}" \
     --out "$OUT/$m-tokenizer.json"
