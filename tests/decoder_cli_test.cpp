@@ -144,6 +144,13 @@ TEST(DecoderCli, TrainResumesExactlyThenDecodes) {
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("--token-fps must be 6.25, 12.5 or 25, got 10"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p.dir / "eval-10" / "eval.json"));
+  // --footage: held-out drives of that footage only; this dataset is procedural, so real footage has none to score.
+  EXPECT_EQ(j["footage"].get<std::string>(), "any");
+  r = test::run_gaia("decoder eval " + q(p.ds) + p.tokenizer() + " --decoder " + q(p.dir / "straight" / "decoder.safetensors") +
+                     " --clips 1 --token-frames 3 --steps 1 --footage real" + p.tiny() + " --out " + q(p.dir / "eval-real"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("no held-out episode of real footage has 9 frames"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p.dir / "eval-real" / "eval.json"));
   r = test::run_gaia("decode " + q(p.dir / "rollout.safetensors") + p.tokenizer() + " --decoder " +
                      q(p.dir / "straight" / "decoder.safetensors") + " --ddim-steps 1 --set decoder.channels=64" + p.tiny() +
                      " --out " + q(p.dir / "out2" / "video.mp4"));

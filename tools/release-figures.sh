@@ -28,6 +28,7 @@ declare -A TOK=([new]="$RUN/tokenizer/tokenizer.safetensors" [shipped]="$MODELS/
 declare -A WORLD=([new]="$RUN/world-calibrated/world.safetensors" [shipped]="$MODELS/world.safetensors")
 declare -A REALISM=([new]="$RUN/probe-realism/probe-realism.safetensors" [shipped]="$MODELS/probe-realism.safetensors")
 declare -A TOKENS=([new]="$RUN/tokens" [shipped]="$RUN/tokens-shipped")
+declare -A DECODER=([new]="$RUN/decoder/decoder.safetensors" [shipped]="$MODELS/decoder.safetensors")
 # The candidate's figures first: they decide whether it ships.
 for m in new shipped; do
   [ "$m" = shipped ] && step "$RUN/tokens-shipped/dataset.json" "$GAIA" tokenize "$RUN/data" --tokenizer "${TOK[shipped]}" \
@@ -53,5 +54,8 @@ for m in new shipped; do
     --seed "$SEED" "${T[@]}" --out "$OUT/$m-procedural"
   step "$OUT/$m-text/eval.json" "$GAIA" eval "${TOKENS[$m]}" "$RUN/data" --world "${WORLD[$m]}" \
     --tokenizer "${TOK[$m]}" --only text --seed "$SEED" "${T[@]}" --out "$OUT/$m-text"
+  # The video decoder against the tokenizer's own on held-out real clips, 10 DDIM steps.
+  step "$OUT/$m-decoder-real/eval.json" "$GAIA" decoder eval "$RUN/data" --decoder "${DECODER[$m]}" \
+    --tokenizer "${TOK[$m]}" --footage real --clips 4 --token-frames 4 --steps 10 "${T[@]}" --out "$OUT/$m-decoder-real"
 done
 log "done: $OUT"

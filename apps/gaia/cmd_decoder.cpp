@@ -104,6 +104,8 @@ void register_decoder(CLI::App& app) {
     add_weights_flag(cmd, Weights::Decoder, weights.get())->required();
     add_weights_flag(cmd, Weights::Tokenizer, tok.get())->required();
     cmd->add_option("--clips", eo->clips, "held-out clips")->check(number_in({1, 1e6}));
+    auto footage = std::make_shared<std::string>();
+    add_footage_flag(cmd, "--footage", footage.get(), "which held-out drives the clips come from");
     cmd->add_option("--token-frames", eo->token_frames, "token frames (6.25 Hz) per clip")->check(number_in({2, 1e6}));
     cmd->add_option("--steps", *steps, "DDIM step counts to compare, e.g. 50,20,10");
     cmd->add_option("--token-fps", eo->token_fps,
@@ -133,6 +135,7 @@ void register_decoder(CLI::App& app) {
         fail("{}: the decoder was trained with K = {}, D = {}; this tokenizer has K = {}, D = {}", *tok, model->K,
              model->D, t->cfg.codebook_size, t->cfg.downsample);
       decoder::DecoderEvalOptions o = *eo;
+      o.footage = world::parse_footage(*footage);
       o.steps = parse_steps(*steps);
       o.seed = uint64_t(run.run.seed);
       o.precision = run_precision(run, dev, "decoder eval");

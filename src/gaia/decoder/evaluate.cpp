@@ -57,7 +57,10 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   torch::NoGradGuard ng;
   const torch::Device dev = model->parameters().front().device();
   data::Dataset ds(dataset);
-  auto eps = data::episode_indices(ds, data::held_out_ids(ds, cfg.run.seed));
+  std::vector<size_t> eps;
+  for (size_t e : data::episode_indices(ds, data::held_out_ids(ds, cfg.run.seed)))
+    if (o.footage == world::Footage::kAny || ds.meta(e).is_procedural() == (o.footage == world::Footage::kProcedural))
+      eps.push_back(e);
   const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz
   std::vector<std::unique_ptr<data::Episode>> episodes;
   std::vector<ClipRef> refs;
@@ -67,7 +70,9 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
     where.push_back({{"episode", ds.ids()[c.episode]}, {"start_s", episodes.back()->times()[size_t(c.frames[0])]}});
     refs.push_back({episodes.size() - 1, c.frames});
   }
-  if (refs.empty()) fail("{}: no held-out episode has {} frames at 25 Hz for a {}-frame token clip", dataset.string(), M, N);
+  if (refs.empty())
+    fail("{}: no held-out episode{} has {} frames at 25 Hz for a {}-frame token clip", dataset.string(),
+         o.footage == world::Footage::kAny ? "" : " of " + world::to_string(o.footage) + " footage", M, N);
   NoiseSchedule sched{-15.0, 15.0, cfg.decoder.schedule_shift};
   DecodeOptions d;
   d.sample = sample_options(cfg.decoder, 0, o.seed);
@@ -83,6 +88,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
 
   nlohmann::json out;
   out["clips"] = refs.size();
+  out["footage"] = world::to_string(o.footage);
   out["clip_starts"] = where;
   out["token_frames"] = N;
   out["frames_25hz"] = M;

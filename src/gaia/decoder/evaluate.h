@@ -11,6 +11,7 @@
 #include "gaia/decoder/unet.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/torch/precision.h"
+#include "gaia/world/footage.h"
 
 namespace gaia::decoder {
 
@@ -41,6 +42,7 @@ using TokenGenerator = std::function<torch::Tensor(const torch::Tensor& tokens, 
 
 struct DecoderEvalOptions {
   int clips = 2;                   // held-out clips
+  world::Footage footage = world::Footage::kAny;  // held-out drives of this footage only (real: recorded cameras)
   int token_frames = 8;            // N token frames at 6.25 Hz per clip (-> 4N - 3 frames at 25 Hz)
   std::vector<int> steps{50, 20, 10};  // DDIM step counts to compare (§5.2 uses 50)
   // Rate of the tokens the video decoder is given: 6.25 Hz (the world model's rate; the decoder upsamples to 25 Hz,
