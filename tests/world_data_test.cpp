@@ -12,6 +12,7 @@
 
 #include "gaia/config.h"
 #include "gaia/core/error.h"
+#include "gaia/core/fs.h"
 #include "gaia/core/npy.h"
 #include "gaia/data/geofence.h"
 #include "gaia/text/vocab.h"
@@ -533,6 +534,20 @@ TEST(WorldEval, SteeringSensitivityBucketsFramesByTheTurnBeforeThem) {
   EXPECT_EQ(t.left.frames, 2);
   EXPECT_TRUE(std::isfinite(t.left.nats));
   EXPECT_GT(std::abs(t.left.mirrored_rise) + std::abs(t.right.mirrored_rise), 1e-4);
+}
+
+// A split.json written before replays and mirror images joined the dataset (train-all's manifest recipe tokenizes
+// the counterfactual replays into a token set that carries the clips' split): each joins its source's list, and
+// an episode of no named source stays out of both.
+TEST(WorldData, EpisodesAddedAfterTheSplitGoWithTheirSource) {
+  test::TempDir dir;
+  write_file_atomic(dir.path / "split.json",
+                    R"({"train": ["a", "a-mirror"], "val_geofence": [], "val_random": [], "val_named": ["b"]})");
+  const auto s = data::load_or_default_split(dir.path, {"a", "a-mirror", "a-cf00", "a-cf00-mirror", "b", "b-cf01", "c"});
+  EXPECT_EQ(s.train, (std::vector<std::string>{"a", "a-mirror", "a-cf00", "a-cf00-mirror"}));
+  EXPECT_EQ(s.val_named, (std::vector<std::string>{"b", "b-cf01"}));
+  EXPECT_TRUE(s.val_random.empty());
+  EXPECT_TRUE(s.val_geofence.empty());
 }
 
 TEST(WorldData, DefaultSplitNeverHoldsOutEveryEpisode) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstring>
+#include <map>
 #include <random>
 
 #include "gaia/core/error.h"
@@ -112,7 +113,20 @@ Split load_or_default_split(const Dataset& ds, double frac, uint64_t seed) {
 }
 
 Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac, uint64_t seed) {
-  if (fs::exists(root / "split.json")) return read_split(root / "split.json");
+  if (fs::exists(root / "split.json")) {
+    Split s = read_split(root / "split.json");
+    // Episodes added after the split was written (counterfactual replays, mirror images) go where the drive they
+    // derive from is: a replay of a training drive trains, one of a held-out drive stays held out.
+    std::map<std::string, std::vector<std::string>*> where;
+    for (auto* list : {&s.train, &s.val_geofence, &s.val_random, &s.val_named})
+      for (const auto& id : *list) where.emplace(id, list);
+    for (const auto& id : ids) {
+      if (where.count(id)) continue;
+      const auto source = where.find(split_source_id(id));
+      if (source != where.end()) source->second->push_back(id);
+    }
+    return s;
+  }
   if (!(frac >= 0 && frac < 1)) fail("validation fraction must be in [0, 1), got {}", frac);
   Split s;
   for (auto& id : ids) (held_out_at_random(id, frac, seed) ? s.val_random : s.train).push_back(id);

@@ -54,9 +54,10 @@ Split read_split(const fs::path& file);  // a split.json; errors name the file
 // The share of episodes the default split holds out at random.
 constexpr double kDefaultValFraction = 0.1;
 
-// DATASET/split.json when present (from `gaia data split`), otherwise a seeded random hold-out of `frac` of the
-// episodes (at least one when there are two or more, and never all of them) so that training always has a validation
-// set and a training set.
+// DATASET/split.json when present (from `gaia data split`; an episode it does not name joins the list of the drive it
+// derives from, split_source_id, e.g. replays tokenized into a token dataset later), otherwise a seeded random
+// hold-out of `frac` of the episodes (at least one when there are two or more, and never all of them) so that
+// training always has a validation set and a training set.
 Split load_or_default_split(const Dataset& ds, double frac = kDefaultValFraction, uint64_t seed = 0);
 // The same for any directory of episodes `ids` (e.g. a token dataset, which carries its source's split.json).
 Split load_or_default_split(const fs::path& root, const std::vector<std::string>& ids, double frac = kDefaultValFraction,
