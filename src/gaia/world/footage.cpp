@@ -15,9 +15,12 @@ std::string to_string(Footage f) {
   return f == Footage::kReal ? "real" : f == Footage::kProcedural ? "procedural" : "any";
 }
 
+bool footage_matches(bool procedural, Footage f) {
+  return f == Footage::kAny || procedural == (f == Footage::kProcedural);
+}
+
 bool footage_matches(const TokenDataset& ds, size_t e, Footage f) {
-  if (f == Footage::kAny) return true;
-  return ds.meta(e).is_procedural() == (f == Footage::kProcedural);
+  return f == Footage::kAny || footage_matches(ds.meta(e).is_procedural(), f);
 }
 
 std::vector<size_t> with_footage(const TokenDataset& ds, const std::vector<size_t>& episodes, Footage f) {

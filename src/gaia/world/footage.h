@@ -12,6 +12,7 @@ namespace gaia::world {
 enum class Footage { kAny, kReal, kProcedural };
 Footage parse_footage(const std::string& s);  // "any" | "real" | "procedural"; fails naming the value otherwise
 std::string to_string(Footage f);
+bool footage_matches(bool procedural, Footage f);  // an episode procedural or recorded
 bool footage_matches(const TokenDataset& ds, size_t e, Footage f);
 // The episodes of `episodes` that match `f`, in order.
 std::vector<size_t> with_footage(const TokenDataset& ds, const std::vector<size_t>& episodes, Footage f);
