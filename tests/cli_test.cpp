@@ -13,15 +13,8 @@
 using namespace gaia;
 
 namespace {
-// Exactly one line that starts with "gaia: error:" and names `what`.
-void expect_one_error_line(const test::RunResult& r, const std::string& what) {
-  EXPECT_NE(r.status, 0) << r.output;
-  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
-  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
-  EXPECT_NE(r.output.find(what), std::string::npos) << r.output;
-}
 
-fs::path make_video(const fs::path& dir, int n) {
+fs::path plain_video(const fs::path& dir, int n) {
   fs::path p = dir / "drive.avi";
   cv::VideoWriter vw(p.string(), cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25, cv::Size(128, 72));
   for (int i = 0; i < n; ++i) {
@@ -88,27 +81,27 @@ TEST(Cli, BadFlagsAndConfigsExitNonZero) {
   test::TempDir dir;
   EXPECT_NE(test::run_gaia("plan --frobnicate").status, 0);
   EXPECT_NE(test::run_gaia("no-such-command").status, 0);
-  expect_one_error_line(test::run_gaia("plan '" + (dir / "missing.yaml").string() + "'"), "missing.yaml");
+  test::expect_one_error_line(test::run_gaia("plan '" + (dir / "missing.yaml").string() + "'"), "missing.yaml");
   write_file_atomic(dir / "typo.yaml", "data:\n  hieght: 72\n");
-  expect_one_error_line(test::run_gaia("plan '" + (dir / "typo.yaml").string() + "'"), "data.hieght");
-  expect_one_error_line(test::run_gaia("plan --set world.d_modle=3"), "world.d_modle");
-  expect_one_error_line(test::run_gaia("plan --set data.height=nan"), "data.height");
-  expect_one_error_line(test::run_gaia("plan --device tpu"), "--device");
+  test::expect_one_error_line(test::run_gaia("plan '" + (dir / "typo.yaml").string() + "'"), "data.hieght");
+  test::expect_one_error_line(test::run_gaia("plan --set world.d_modle=3"), "world.d_modle");
+  test::expect_one_error_line(test::run_gaia("plan --set data.height=nan"), "data.height");
+  test::expect_one_error_line(test::run_gaia("plan --device tpu"), "--device");
 }
 
 TEST(Cli, IngestErrorsLeaveNoOutput) {
   test::TempDir dir;
   fs::path ds = dir / "ds";
-  expect_one_error_line(test::run_gaia("ingest '" + (dir / "none.mp4").string() + "' --out '" + ds.string() + "'"), "none.mp4");
+  test::expect_one_error_line(test::run_gaia("ingest '" + (dir / "none.mp4").string() + "' --out '" + ds.string() + "'"), "none.mp4");
   write_file_atomic(dir / "empty.mp4", "");
-  expect_one_error_line(test::run_gaia("ingest '" + (dir / "empty.mp4").string() + "' --out '" + ds.string() + "'"), "empty.mp4");
-  fs::path video = make_video(dir.path, 12);
+  test::expect_one_error_line(test::run_gaia("ingest '" + (dir / "empty.mp4").string() + "' --out '" + ds.string() + "'"), "empty.mp4");
+  fs::path video = plain_video(dir.path, 12);
   write_file_atomic(dir / "bad.csv", "time_s,speed,curvature\n0,1,0\n0.2,inf,0\n");
-  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "bad.csv").string() +
+  test::expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "bad.csv").string() +
                                        "' --out '" + ds.string() + "'"),
                         "bad.csv:3");
   write_file_atomic(dir / "cols.csv", "t,v\n0,1\n");
-  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "cols.csv").string() +
+  test::expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --signals '" + (dir / "cols.csv").string() +
                                        "' --out '" + ds.string() + "'"),
                         "cols.csv:1");
   // Nothing half-written: no episode directories, no temporary leftovers.
@@ -119,12 +112,12 @@ TEST(Cli, IngestErrorsLeaveNoOutput) {
   auto ok = test::run_gaia("ingest '" + video.string() + "' --meta weather=rain --out '" + ds.string() + "'");
   EXPECT_EQ(ok.status, 0) << ok.output;
   EXPECT_TRUE(fs::exists(ds / "episodes" / "drive" / "episode.json"));
-  expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --out '" + ds.string() + "'"), "already exists");
+  test::expect_one_error_line(test::run_gaia("ingest '" + video.string() + "' --out '" + ds.string() + "'"), "already exists");
 }
 
 TEST(Cli, DataStatsAndSplit) {
   test::TempDir dir;
-  fs::path video = make_video(dir.path, 60);
+  fs::path video = plain_video(dir.path, 60);
   fs::path ds = dir / "ds";
   write_file_atomic(dir / "s.csv", "time_s,speed,curvature\n0,3,0.01\n3,15,-0.01\n");
   for (auto [id, weather, lat] : {std::tuple{"a", "rain", "51.50"}, {"b", "clear", "51.60"}, {"c", "clear", "51.70"}}) {
@@ -232,17 +225,17 @@ TEST(Cli, ConvertSetsAStoredSamplingSetting) {
   EXPECT_EQ(back.to_yaml(), c.to_yaml());
 
   const auto bad = d / "bad.safetensors";
-  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() + " --set world.d_model=64 --out " +
+  test::expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() + " --set world.d_model=64 --out " +
                                        bad.string()),
                         "--set world.d_model=64: only sampling settings");
-  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
+  test::expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
                                        " --set world.temperature=0 --out " + bad.string()),
                         "'world.temperature' = 0 is out of range: allowed (0, 100]");
-  expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
+  test::expect_one_error_line(test::run_gaia("convert " + (d / "world.safetensors").string() +
                                        " --set world.top_k=many --out " + bad.string()),
                         "world.top_k");
   auto peer = test::source_dir() / "tests" / "fixtures" / "peer.safetensors";
-  expect_one_error_line(test::run_gaia("convert " + peer.string() + " --set world.temperature=0.9 --out " + bad.string()),
+  test::expect_one_error_line(test::run_gaia("convert " + peer.string() + " --set world.temperature=0.9 --out " + bad.string()),
                         "no gaia.config metadata");
   EXPECT_FALSE(fs::exists(bad));
 }

@@ -13,18 +13,17 @@
 using namespace gaia;
 
 namespace {
-Config load(const std::string& name) { return Config::load(test::source_dir() / "configs" / name); }
 }  // namespace
 
 TEST(Config, DefaultYamlEqualsBuiltInDefaults) {
   Config builtin;
-  Config file = load("default.yaml");
+  Config file = test::config("default.yaml");
   EXPECT_EQ(file.to_yaml(), builtin.to_yaml());
 }
 
 TEST(Config, AllShippedConfigsLoadAndRoundTrip) {
   for (auto name : {"tiny.yaml", "default.yaml", "paper.yaml"}) {
-    Config c = load(name);
+    Config c = test::config(name);
     Config again;
     again.apply_yaml(c.to_yaml(), "dump");
     EXPECT_EQ(again.to_yaml(), c.to_yaml()) << name;
@@ -129,7 +128,7 @@ TEST(Config, NumbersAreReadAsWritten) {
 }
 
 TEST(Plan, PaperConfigMatchesThePaper) {
-  Config c = load("paper.yaml");
+  Config c = test::config("paper.yaml");
   sizing::Plan p = sizing::make_plan(c);
   EXPECT_EQ(p.image_tokens, 576);             // §4.1: 18 x 32
   EXPECT_EQ(c.step_tokens(), 610);            // §2.1: m + n + l = 610
@@ -142,14 +141,14 @@ TEST(Plan, PaperConfigMatchesThePaper) {
 }
 
 TEST(Plan, WorldModelCountFollowsTheGptFormula) {
-  Config c = load("tiny.yaml");
+  Config c = test::config("tiny.yaml");
   const int64_t d = c.world.d_model, L = c.world.n_layers;
   EXPECT_EQ(sizing::world_params(c).non_embedding, L * (12 * d * d + 13 * d) + 2 * d);
   c.world.n_layers *= 2;
   EXPECT_EQ(sizing::world_params(c).non_embedding, 2 * L * (12 * d * d + 13 * d) + 2 * d);
   // Tiny is ~0.1M parameters as DESIGN.md promises; default is a few million.
-  EXPECT_LT(sizing::world_params(load("tiny.yaml")).total, 200000);
-  int64_t def = sizing::world_params(load("default.yaml")).total;
+  EXPECT_LT(sizing::world_params(test::config("tiny.yaml")).total, 200000);
+  int64_t def = sizing::world_params(test::config("default.yaml")).total;
   EXPECT_GT(def, 1000000);
   EXPECT_LT(def, 20000000);
 }
@@ -157,7 +156,7 @@ TEST(Plan, WorldModelCountFollowsTheGptFormula) {
 // The training-memory terms follow the run's settings: sharding divides AdamW's moments, fused attention drops the
 // s^2 probabilities (kept per layer, and three at once in the backward pass), checkpointing keeps one layer's activations, 16-bit autocast halves most of them.
 TEST(Plan, TrainingMemoryFollowsTheRunsSettings) {
-  Config c = load("default.yaml");
+  Config c = test::config("default.yaml");
   auto base = sizing::train_memory_settings(c, 1, 1, false, false);
   EXPECT_EQ(base.micro_batch, c.world.batch_size);
   EXPECT_EQ(base.activation_bytes, 4);
@@ -197,7 +196,7 @@ TEST(Plan, TrainingMemoryFollowsTheRunsSettings) {
   EXPECT_GT(sizing::world_train_memory(c, half).activations, sizing::world_train_memory(c, fused).activations);
 
   // One bf16 sequence of the paper's model with fused attention: about Korthikanti et al.'s 34 s d bytes a layer.
-  Config paper = load("paper.yaml");
+  Config paper = test::config("paper.yaml");
   const double per_layer = sizing::make_plan(paper).world_act_gb_per_seq * 1e9 / paper.world.n_layers;
   EXPECT_NEAR(per_layer / (34.0 * double(paper.sequence_length()) * paper.world.d_model), 1, 0.15);
 }

@@ -28,7 +28,6 @@ using namespace gaia::decoder;
 
 namespace {
 
-Config tiny() { return Config::load(test::source_dir() / "configs" / "tiny.yaml"); }
 
 // Random weights everywhere, including the zero-initialised output projections, so every path is exercised.
 void randomize(torch::nn::Module& m, uint64_t seed, double std = 0.05) {
@@ -207,11 +206,11 @@ TEST(DecoderTasks, TasksAreDrawnEquallyAndInterpolationUpsamples) {
 }
 
 TEST(DecoderUNet, ShapesAndParameterCountMatchThePlan) {
-  for (auto c : {tiny(), Config()}) {
+  for (auto c : {test::config("tiny.yaml"), Config()}) {
     VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
     EXPECT_EQ(m->parameter_count(), sizing::decoder_params(c).total) << c.name;
   }
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   auto in = random_input(m, 2, 5, 32, 64, 1);
   auto v = m->forward(in);
@@ -221,7 +220,7 @@ TEST(DecoderUNet, ShapesAndParameterCountMatchThePlan) {
 }
 
 TEST(DecoderUNet, TemporalSwitchMakesFramesIndependent) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   randomize(*m, 3);
   m->eval();
@@ -334,7 +333,7 @@ TEST(DecoderSchedule, UpsampleWindowsFillEveryOddFrame) {
 }
 
 TEST(DecoderVideo, DecodesToTwentyFiveHertzKeepingKnownFrames) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   randomize(*m, 7);
   m->eval();
@@ -365,7 +364,7 @@ TEST(DecoderVideo, DecodesToTwentyFiveHertzKeepingKnownFrames) {
 // near the float32 one (frames in [-1, 1]), differs from it, and is float32 and repeatable.
 TEST(DecoderVideo, Bf16DecodingStaysNearFloat32) {
   if (!cpu_has_bf16()) GTEST_SKIP() << "this CPU runs --precision bf16 as fp32 (no bf16 instructions)";
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   randomize(*m, 7);
   m->eval();
@@ -387,7 +386,7 @@ TEST(DecoderVideo, Bf16DecodingStaysNearFloat32) {
 }
 
 TEST(DecoderVideo, BadInputsAreClearErrors) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   NoiseSchedule sch;
   DecodeOptions o;
@@ -408,7 +407,7 @@ TEST(DecoderVideo, BadInputsAreClearErrors) {
 }
 
 TEST(DecoderVideo, ForwardAndWindowAreRepeatable) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   randomize(*m, 7);
   m->eval();
@@ -477,7 +476,7 @@ TEST(DecoderEval, BlendToRateKeepsKeyFramesAndInterpolatesLinearly) {
 // with tokens. With one DDIM step the output is a function of that one v, so frames without tokens (interpolation)
 // must come out exactly as without mixing, and frames with tokens must not.
 TEST(DecoderVideo, ImageVideoMixingOnlyTouchesFramesWithTokens) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   randomize(*m, 9);
   m->eval();
@@ -537,7 +536,7 @@ TEST(DecoderResidual, TrainingTargetIsTheResidualOverTheCoarseFrame) {
 }
 
 TEST(DecoderResidual, SamplerAddsTheCoarseFrameBack) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: zero output projection, v = 0
   torch::NoGradGuard ng;
   auto in = random_input(m, 1, 5, 32, 64, 5);
@@ -599,7 +598,7 @@ TEST(DecoderResidual, InterpolateTaskDiffusesTheResidualOverTheBlend) {
 }
 
 TEST(DecoderResidual, SamplerStartsInBetweenFramesFromTheBlend) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   ASSERT_TRUE(c.decoder.interp_base);
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v = 0
   torch::NoGradGuard ng;
@@ -640,7 +639,7 @@ void save_without_key(VideoUNet& m, Config& c, const std::string& key, const fs:
 // with it off; files saved now keep what they were trained with.
 TEST(DecoderResidual, OldDecoderFilesLoadWithoutTheInterpolationBase) {
   test::TempDir dir;
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   save_decoder(m, c, dir.path / "new.safetensors");
   Config back;
@@ -657,7 +656,7 @@ TEST(DecoderResidual, OldDecoderFilesTakeAStartTheyCanUse) {
   test::TempDir dir;
   Config back;
   for (bool cond : {true, false}) {
-    Config c = tiny();
+    Config c = test::config("tiny.yaml");
     c.decoder.cond_image = cond;
     c.decoder.interp_base = cond;
     c.decoder.start_time = cond ? 0.7 : 1.0;
@@ -693,7 +692,7 @@ TEST(DecoderSampler, StartingNoiseCorrelatesTheFramesOfAWindow) {
   auto one = starting_noise(sizes, 1.0, g);
   EXPECT_TRUE(torch::equal(one.select(1, 0), one.select(1, 3)));
   EXPECT_NE(test::error_of([&] { starting_noise(sizes, 1.5, g); }).find("decoder.noise_correlation"), std::string::npos);
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   c.decoder.noise_correlation = -0.1;
   EXPECT_NE(test::error_of([&] { c.validate(); }).find("decoder.noise_correlation"), std::string::npos);
 }
@@ -710,7 +709,7 @@ static WindowInput all_frames_generated(const VideoUNet& m, const DenoiserInput&
 // The sampler draws its starting noise with the option: a fresh model (v = 0) maps each frame's noise to its output,
 // so with r = 1 frames with the same coarse image come out equal, and with r = 0 they do not.
 TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);  // fresh: v = 0
   torch::NoGradGuard ng;
   auto in = random_input(m, 1, 5, 32, 64, 8);
@@ -732,7 +731,7 @@ TEST(DecoderSampler, SampleWindowUsesTheNoiseCorrelation) {
 // A fresh model (v ~ 0: its output layer starts at zero, the rest does not) and a window of 5 frames to generate
 // whose coarse frames are a random input's scaled by 0.3, for the tests of the starting noise.
 struct FreshWindow {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   VideoUNet m{c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample};
   WindowInput w;
   NoiseSchedule sch;

@@ -23,18 +23,8 @@ using test::q;
 
 namespace {
 
-std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
+std::string tiny_flags() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
 
-// Exactly one line that starts with "gaia: error:" and names `what`; exit status `status` (any non-zero if 0).
-void expect_one_error_line(const test::RunResult& r, const std::string& what, int status = 0) {
-  if (status) {
-    EXPECT_EQ(r.status, status) << r.output;
-  }
-  EXPECT_NE(r.status, 0) << r.output;
-  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
-  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
-  EXPECT_NE(r.output.find(what), std::string::npos) << "wanted '" << what << "' in: " << r.output;
-}
 
 // A bare token file of the tiny config's grid (4 x 8, K = 256): world training without a tokenizer.
 fs::path bare_tokens(const fs::path& dir, int frames = 40, int max_id = 255) {
@@ -73,24 +63,24 @@ test::RunResult run_gaia_with_file_limit(int kib, const std::string& args) {
 // Head counts of 0 used to divide by zero (SIGFPE); each way in now names the key and its range.
 TEST(HardeningCli, ZeroHeadsAreRefusedFromEveryWayIn) {
   test::TempDir dir;
-  expect_one_error_line(test::run_gaia("plan" + tiny() + " --set world.n_heads=0"), "world.n_heads");
-  expect_one_error_line(test::run_gaia("plan" + tiny() + " --set decoder.heads=0"), "[1, 1024]");
+  test::expect_one_error_line(test::run_gaia("plan" + tiny_flags() + " --set world.n_heads=0"), "world.n_heads");
+  test::expect_one_error_line(test::run_gaia("plan" + tiny_flags() + " --set decoder.heads=0"), "[1, 1024]");
   write_file_atomic(dir / "heads.yaml", "world:\n  n_heads: 0\n");
-  expect_one_error_line(test::run_gaia("plan " + q(dir / "heads.yaml")), "heads.yaml:2");
-  expect_one_error_line(test::run_gaia("plan" + tiny() + " --set decoder.res_blocks=1000000000"), "decoder.res_blocks");
+  test::expect_one_error_line(test::run_gaia("plan " + q(dir / "heads.yaml")), "heads.yaml:2");
+  test::expect_one_error_line(test::run_gaia("plan" + tiny_flags() + " --set decoder.res_blocks=1000000000"), "decoder.res_blocks");
   // The ranges are listed for users: one line per key, with the value in this config.
-  auto keys = test::run_gaia("plan" + tiny() + " --keys");
+  auto keys = test::run_gaia("plan" + tiny_flags() + " --keys");
   ASSERT_EQ(keys.status, 0) << keys.output;
   EXPECT_TRUE(std::regex_search(keys.output, std::regex("\nworld\\.n_heads +int +architecture +4 +\\[1, 1024\\]\n"))) << keys.output;
-  expect_one_error_line(test::run_gaia("plan" + tiny() + " --set world.d_model=-48"), "world.d_model");
-  expect_one_error_line(test::run_gaia("plan" + tiny() + " --set tokenizer.batch_size=-1"), "tokenizer.batch_size");
+  test::expect_one_error_line(test::run_gaia("plan" + tiny_flags() + " --set world.d_model=-48"), "world.d_model");
+  test::expect_one_error_line(test::run_gaia("plan" + tiny_flags() + " --set tokenizer.batch_size=-1"), "tokenizer.batch_size");
   const fs::path tokens = bare_tokens(dir.path);
-  expect_one_error_line(test::run_gaia("world train " + q(tokens) + tiny() + " --set world.n_heads=0 --out " + q(dir / "w")),
+  test::expect_one_error_line(test::run_gaia("world train " + q(tokens) + tiny_flags() + " --set world.n_heads=0 --out " + q(dir / "w")),
                         "world.n_heads");
   EXPECT_FALSE(fs::exists(dir / "w"));
 
   // A weights file whose stored config says n_heads: 0.
-  auto r = test::run_gaia("world train " + q(tokens) + tiny() + " --steps 1 --out " + q(dir / "ok"));
+  auto r = test::run_gaia("world train " + q(tokens) + tiny_flags() + " --steps 1 --out " + q(dir / "ok"));
   ASSERT_EQ(r.status, 0) << r.output;
   SafetensorsFile good(dir / "ok" / "world.safetensors");
   SafetensorsWriter bad;
@@ -102,7 +92,7 @@ TEST(HardeningCli, ZeroHeadsAreRefusedFromEveryWayIn) {
   ASSERT_NE(good.metadata().at("gaia.config").find("n_heads: 4"), std::string::npos);
   bad.write(dir / "bad.safetensors");
   r = test::run_gaia("generate --world " + q(dir / "bad.safetensors") + " --frames 1 --out " + q(dir / "gen"));
-  expect_one_error_line(r, "bad.safetensors");
+  test::expect_one_error_line(r, "bad.safetensors");
   EXPECT_NE(r.output.find("world.n_heads"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir / "gen"));
 }
@@ -139,7 +129,7 @@ TEST(HardeningCli, CommandLineNumbersAndExclusiveFlags) {
            {"world", "subcommand"},
        }) {
     SCOPED_TRACE(args);
-    expect_one_error_line(test::run_gaia(args), what, 2);
+    test::expect_one_error_line(test::run_gaia(args), what, 2);
   }
   EXPECT_FALSE(fs::exists(dir / "o"));
   // --help still prints help and exits 0.
@@ -153,11 +143,11 @@ TEST(HardeningCli, CommandLineNumbersAndExclusiveFlags) {
 TEST(HardeningCli, PromptStartAndTokenIdsAreChecked) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
-  auto r = test::run_gaia("world train " + q(tokens) + tiny() + " --steps 1 --out " + q(dir / "w"));
+  auto r = test::run_gaia("world train " + q(tokens) + tiny_flags() + " --steps 1 --out " + q(dir / "w"));
   ASSERT_EQ(r.status, 0) << r.output;
   const std::string gen = "generate " + q(tokens) + " --world " + q(dir / "w" / "world.safetensors") +
                           " --episode 0 --frames 2 --threads 1";
-  expect_one_error_line(test::run_gaia(gen + " --start 100000000 --out " + q(dir / "g")), "--start");
+  test::expect_one_error_line(test::run_gaia(gen + " --start 100000000 --out " + q(dir / "g")), "--start");
   EXPECT_FALSE(fs::exists(dir / "g"));
   r = test::run_gaia(gen + " --start 3 --out " + q(dir / "g"));
   EXPECT_EQ(r.status, 0) << r.output;
@@ -165,18 +155,18 @@ TEST(HardeningCli, PromptStartAndTokenIdsAreChecked) {
   // before anything is generated or written, not decoded into a garbage preview.
   r = test::run_gaia(gen + " --tokenizer " + q(test::source_dir() / "models" / "tokenizer.safetensors") + " --out " +
                      q(dir / "mixed"));
-  expect_one_error_line(r, "tokenizer.safetensors: the tokenizer makes 9x16 tokens of K = 1024");
+  test::expect_one_error_line(r, "tokenizer.safetensors: the tokenizer makes 9x16 tokens of K = 1024");
   EXPECT_FALSE(fs::exists(dir / "mixed"));
   // A million futures do not fit in memory: refused up front with what they would need, nothing written.
   r = test::run_gaia(gen + " --futures 1000000 --out " + q(dir / "many"));
-  expect_one_error_line(r, "futures = 1000000");
+  test::expect_one_error_line(r, "futures = 1000000");
   EXPECT_TRUE(std::regex_search(r.output, std::regex("would need about [0-9.]+ GB of memory, but [0-9.]+ GB are available")))
       << r.output;
   EXPECT_FALSE(fs::exists(dir / "many"));
   // So is a world model too large to train here (each key within its range, the product not).
-  r = test::run_gaia("world train " + q(tokens) + tiny() +
+  r = test::run_gaia("world train " + q(tokens) + tiny_flags() +
                      " --set world.d_model=65536 --set world.n_layers=1024 --set world.n_heads=1024 --out " + q(dir / "huge"));
-  expect_one_error_line(r, "training this world model");
+  test::expect_one_error_line(r, "training this world model");
   EXPECT_NE(r.output.find("would need about"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir / "huge"));
 
@@ -184,8 +174,8 @@ TEST(HardeningCli, PromptStartAndTokenIdsAreChecked) {
   std::vector<int16_t> v(40 * 32, 3);
   v[5 * 32 + 7] = 301;  // step 5, position 7
   npy_write(big / "tokens.npy", npy_make(DType::I16, {40, 4, 8}, v));
-  r = test::run_gaia("world train " + q(big / "tokens.npy") + tiny() + " --steps 1 --out " + q(big / "w"));
-  expect_one_error_line(r, "tokens.npy");
+  r = test::run_gaia("world train " + q(big / "tokens.npy") + tiny_flags() + " --steps 1 --out " + q(big / "w"));
+  test::expect_one_error_line(r, "tokens.npy");
   EXPECT_NE(r.output.find("301"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("256"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(big / "w" / "world.safetensors"));
@@ -227,8 +217,8 @@ TEST(HardeningCli, RunDirectoryIsLockedForOneRun) {
   {
     DirLock held(dir / "w");
     EXPECT_NE(test::error_of([&] { DirLock again(dir / "w"); }).find(std::to_string(getpid())), std::string::npos);
-    auto r = test::run_gaia("world train " + q(tokens) + tiny() + " --steps 1 --out " + q(dir / "w"));
-    expect_one_error_line(r, "another gaia run (pid " + std::to_string(getpid()) + ")");
+    auto r = test::run_gaia("world train " + q(tokens) + tiny_flags() + " --steps 1 --out " + q(dir / "w"));
+    test::expect_one_error_line(r, "another gaia run (pid " + std::to_string(getpid()) + ")");
     EXPECT_FALSE(fs::exists(dir / "w" / "checkpoint"));
   }
   // A lock that created its directory and left nothing in it takes the directory with it.
@@ -246,7 +236,7 @@ TEST(HardeningCli, RunDirectoryIsLockedForOneRun) {
 TEST(HardeningCli, WorldTrainResumesExactlyAfterAKill) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
-  const std::string train = "world train " + q(tokens) + tiny() + " --set run.checkpoint_every=2 --steps 6 --val-every 3";
+  const std::string train = "world train " + q(tokens) + tiny_flags() + " --set run.checkpoint_every=2 --steps 6 --val-every 3";
   auto r = test::run_gaia(train + " --out " + q(dir / "straight"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = test::run_gaia(train + " --stop-after 4 --out " + q(dir / "resumed"));
@@ -270,7 +260,7 @@ TEST(HardeningCli, WorldTrainResumesExactlyAfterAKill) {
 TEST(HardeningCli, FullDiskDuringACheckpointIsOneErrorAndKeepsTheLastOne) {
   test::TempDir dir;
   const fs::path tokens = bare_tokens(dir.path);
-  const std::string train = "world train " + q(tokens) + tiny() + " --set run.checkpoint_every=1 --val-every 100";
+  const std::string train = "world train " + q(tokens) + tiny_flags() + " --set run.checkpoint_every=1 --val-every 100";
   auto r = test::run_gaia(train + " --steps 1 --out " + q(dir / "w"));
   ASSERT_EQ(r.status, 0) << r.output;
   const auto before = weights_of(dir / "w" / "checkpoint" / "world.safetensors");

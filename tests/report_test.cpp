@@ -47,11 +47,6 @@ std::string data_uri_bytes(const std::string& html, const std::string& mime) {
   return base64_decode(html.substr(start, html.find('"', start) - start));
 }
 
-size_t count(const std::string& hay, const std::string& needle) {
-  size_t n = 0;
-  for (size_t at = hay.find(needle); at != std::string::npos; at = hay.find(needle, at + 1)) ++n;
-  return n;
-}
 
 // Point counts of every <polyline points="..."> in the page.
 std::vector<size_t> polyline_points(const std::string& html) {
@@ -59,7 +54,7 @@ std::vector<size_t> polyline_points(const std::string& html) {
   const std::string tag = "points=\"";
   for (size_t at = html.find(tag); at != std::string::npos; at = html.find(tag, at + 1)) {
     const size_t start = at + tag.size();
-    n.push_back(count(html.substr(start, html.find('"', start) - start), ","));
+    n.push_back(test::occurrences(html.substr(start, html.find('"', start) - start), ","));
   }
   std::sort(n.begin(), n.end());
   return n;
@@ -181,7 +176,7 @@ TEST(Report, EmbedsEveryElementAndEscapesText) {
   // SVG inlined without its prolog; the curves are one chart per key: loss at steps 0, 10, 30 (20 is null, the torn
   // last line is skipped), val.bits_per_token at 10 and 30; the guidance plot has its 5 points.
   EXPECT_EQ(html.find("<?xml"), std::string::npos);
-  EXPECT_EQ(count(html, "<svg"), 3u);
+  EXPECT_EQ(test::occurrences(html, "<svg"), 3);
   EXPECT_EQ(polyline_points(html), (std::vector<size_t>{2, 3, 5}));
   EXPECT_NE(html.find(">val.bits_per_token</text>"), std::string::npos);
   // Self-contained: no external references, no input paths.
@@ -262,10 +257,10 @@ TEST(Report, ChromiumShowsThePage) {
   // The DOM Chromium built: the page parses into the elements we wrote.
   ASSERT_EQ(chromium(d, "--dump-dom", d / "report.html", d / "dom.html"), 0);
   const std::string dom = read_file(d / "dom.html");
-  EXPECT_EQ(count(dom, "<img"), 2u);    // magenta.png, prompt.gif
-  EXPECT_EQ(count(dom, "<video"), 1u);  // f1.mp4
-  EXPECT_EQ(count(dom, "<svg"), 3u);    // guidance plot, two curves
-  EXPECT_EQ(count(dom, "<table"), 2u);  // the table, the metrics
+  EXPECT_EQ(test::occurrences(dom, "<img"), 2);    // magenta.png, prompt.gif
+  EXPECT_EQ(test::occurrences(dom, "<video"), 1);  // f1.mp4
+  EXPECT_EQ(test::occurrences(dom, "<svg"), 3);    // guidance plot, two curves
+  EXPECT_EQ(test::occurrences(dom, "<table"), 2);  // the table, the metrics
   EXPECT_NE(dom.find("gaia &lt;demo&gt; &amp; co"), std::string::npos);
 
   // The screenshot: window-sized, not blank, and the magenta image is on it.

@@ -20,7 +20,7 @@ using namespace gaia;
 
 namespace {
 
-constexpr int64_t kN = 6, kK = 32;
+constexpr int64_t kSimN = 6, kSimK = 32;
 
 struct Fixture {
   world::WorldInfo info;
@@ -31,9 +31,9 @@ struct Fixture {
     info.config.world.top_k = 8;
     info.grid_h = 2;
     info.grid_w = 3;
-    info.K = kK;
+    info.K = kSimK;
     torch::manual_seed(12);
-    model = world::WorldModel(info.config.world, kN, kK);
+    model = world::WorldModel(info.config.world, kSimN, kSimK);
     model->eval();
   }
 };
@@ -44,7 +44,7 @@ TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
   Fixture f;
   const int64_t T = f.model->layout.T, P = 2, F = T + 3;  // past the window: the history is re-encoded
   torch::manual_seed(3);
-  auto prompt = torch::randint(0, kK, {P, kN}, torch::kLong);
+  auto prompt = torch::randint(0, kSimK, {P, kSimN}, torch::kLong);
   auto prompt_actions = torch::tensor({{7.0f, 0.001f}, {7.5f, 0.002f}});
   std::vector<sim::Action> commands;
   for (int64_t k = 0; k < F; ++k) commands.push_back({6.0 + 0.2 * double(k), k % 3 == 0 ? 0.01 : -0.005});
@@ -84,7 +84,7 @@ TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
   EXPECT_EQ(session.steps(), P);
   for (int64_t k = 0; k < F; ++k) {
     auto tok = session.step(commands[size_t(k)]);
-    ASSERT_EQ(tok.sizes(), torch::IntArrayRef({kN}));
+    ASSERT_EQ(tok.sizes(), torch::IntArrayRef({kSimN}));
     EXPECT_TRUE(torch::equal(tok, expected[P + k])) << "step " << k;
   }
   EXPECT_TRUE(torch::equal(session.tokens(), expected));
@@ -98,7 +98,7 @@ TEST(SimSession, AForkContinuesAsItsParentAndApartFromIt) {
   s.sampling = "sample";
   sim::SimSession a(f.model, f.info, s);
   torch::manual_seed(5);
-  a.start(torch::randint(0, kK, {2, kN}, torch::kLong), {}, "rain");
+  a.start(torch::randint(0, kSimK, {2, kSimN}, torch::kLong), {}, "rain");
   for (int i = 0; i < 3; ++i) a.step({8, 0});
   auto b = a.fork();
   // The same commands: the same frames, past the window, whichever steps first.
@@ -124,16 +124,16 @@ TEST(SimSession, BadInputIsOneClearError) {
   Fixture f;
   sim::SimSession s(f.model, f.info, {});
   EXPECT_NE(test::error_of([&] { s.step({8, 0}); }).find("after start()"), std::string::npos);
-  EXPECT_NE(test::error_of([&] { s.start(torch::full({2, kN}, kK, torch::kLong)); }).find("[0, K = 32)"),
+  EXPECT_NE(test::error_of([&] { s.start(torch::full({2, kSimN}, kSimK, torch::kLong)); }).find("[0, K = 32)"),
             std::string::npos);
-  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kN + 1}, torch::kLong)); }).find("n = 6"),
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kSimN + 1}, torch::kLong)); }).find("n = 6"),
             std::string::npos);
   const int64_t T = f.model->layout.T;
-  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({T, kN}, torch::kLong)); }).find("at most"), std::string::npos);
-  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kN}, torch::kLong), torch::zeros({3, 2})); })
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({T, kSimN}, torch::kLong)); }).find("at most"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { s.start(torch::zeros({2, kSimN}, torch::kLong), torch::zeros({3, 2})); })
                 .find("prompt actions"),
             std::string::npos);
-  s.start(torch::zeros({1, kN}, torch::kLong));
+  s.start(torch::zeros({1, kSimN}, torch::kLong));
   EXPECT_NE(test::error_of([&] { s.step({std::nan(""), 0.7}); }).find("curvature"), std::string::npos);
   EXPECT_NE(test::error_of([&] { s.step({-1, 0}); }).find("speed"), std::string::npos);
   EXPECT_NE(test::error_of([&] { s.step({INFINITY, 0}); }).find("finite"), std::string::npos);
@@ -147,7 +147,7 @@ namespace {
 
 nlohmann::json raw_prompt(int64_t frames) {
   nlohmann::json rows = nlohmann::json::array();
-  for (int64_t k = 0; k < frames; ++k) rows.push_back(std::vector<int64_t>(kN, (3 * k) % kK));
+  for (int64_t k = 0; k < frames; ++k) rows.push_back(std::vector<int64_t>(kSimN, (3 * k) % kSimK));
   return {{"tokens", rows}, {"actions", nlohmann::json::array({{7.0, 0.001}, {7.5, nullptr}})}};
 }
 
@@ -168,7 +168,7 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
   sim::SessionSettings s;
   s.seed = 9;
   sim::SimSession direct(f.model, f.info, s);
-  direct.start(torch::stack({torch::full({kN}, 0, torch::kLong), torch::full({kN}, 3, torch::kLong)}),
+  direct.start(torch::stack({torch::full({kSimN}, 0, torch::kLong), torch::full({kSimN}, 3, torch::kLong)}),
                torch::tensor({{7.0f, 0.001f}, {7.5f, NAN}}), "rain");
   for (int k = 0; k < 3; ++k) {
     const nlohmann::json frame = k == 2 ? nlohmann::json("jpeg") : nlohmann::json(true);
@@ -176,7 +176,7 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
     ASSERT_EQ(r.status, 200) << r.body.dump();
     auto expected = direct.step({8, 0.01});
     EXPECT_EQ(r.body["tokens"].get<std::vector<int64_t>>(),
-              std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kN));
+              std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kSimN));
     // the app's encoder, called on the frame's tokens in the format asked (true: PNG)
     EXPECT_EQ(r.body["frame"], nlohmann::json::array({k == 2 ? "jpeg" : "png", expected.sum().item<int64_t>()}));
     EXPECT_EQ(r.body["step"], 2 + k);
@@ -212,7 +212,7 @@ TEST(SimHub, SessionsAreCreatedSteppedForkedAndClosedAndBadRequestsAreAnswered) 
   auto expected = direct.step({8, 0.01});
   EXPECT_EQ(r.body["step"], 5);
   EXPECT_EQ(r.body["tokens"].get<std::vector<int64_t>>(),
-            std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kN));
+            std::vector<int64_t>(expected.data_ptr<int64_t>(), expected.data_ptr<int64_t>() + kSimN));
   EXPECT_EQ(hub.handle("reset", {{"session", id}}).body["steps"], 2);
   EXPECT_EQ(hub.handle("close", {{"session", fork}}).status, 200);
   EXPECT_EQ(hub.handle("step", {{"session", fork}}).status, 404);
@@ -297,7 +297,7 @@ TEST(SimHub, EachStepReadsBackItsLastFrames) {
   auto tokens = r.body["tokens"].get<std::vector<int64_t>>();
   int64_t sum = 0;
   for (auto t : tokens) sum += t;
-  sum += kN * 3;  // the prompt's frames: all 0, then all 3
+  sum += kSimN * 3;  // the prompt's frames: all 0, then all 3
   EXPECT_EQ(r.body["read_back"]["frames"], 3);
   EXPECT_EQ(r.body["read_back"]["sum"], sum);
   sim::SessionHub early(f.model, f.info, {}, {}, {}, rb);
@@ -319,7 +319,7 @@ TEST(SimSession, ForkAlongPlansStepsTheCopiesAsOneBatch) {
     s.sampling = sampling;
     sim::SimSession a(f.model, f.info, s);
     torch::manual_seed(8);
-    a.start(torch::randint(0, kK, {2, kN}, torch::kLong), torch::tensor({{7.0f, 0.0f}, {7.0f, 0.001f}}), "rain");
+    a.start(torch::randint(0, kSimK, {2, kSimN}, torch::kLong), torch::tensor({{7.0f, 0.0f}, {7.0f, 0.001f}}), "rain");
     a.step({8, 0.01});
     const auto before = a.tokens().clone();
     std::vector<std::vector<sim::Action>> plans;
@@ -346,7 +346,7 @@ TEST(SimSession, ForkAlongPlansStepsTheCopiesAsOneBatch) {
     }
   }
   sim::SimSession a(f.model, f.info, {});
-  a.start(torch::zeros({1, kN}, torch::kLong));
+  a.start(torch::zeros({1, kSimN}, torch::kLong));
   using Plans = std::vector<std::vector<sim::Action>>;
   EXPECT_NE(test::error_of([&] { a.fork(Plans{}); }).find("at least one plan"), std::string::npos);
   EXPECT_NE(test::error_of([&] { a.fork(Plans{{{8, 0}}, {{8, 0}, {8, 0}}}); }).find("same number of steps"),

@@ -30,9 +30,6 @@ struct PeerIo {
   torch::Tensor get(const std::string& name) const { return tensor_from_view(file.get(name)); }
 };
 
-double rel_err(const torch::Tensor& a, const torch::Tensor& b) {
-  return ((a - b).norm() / (b.norm() + 1e-12)).item<double>();
-}
 
 // A copy of a fixture encoder in a scratch directory, to break one file of.
 fs::path copy_of(const std::string& variant, const test::TempDir& tmp) {
@@ -111,11 +108,11 @@ TEST(T5Peer, EncodeMatchesThePeer) {
     EXPECT_EQ(got.scalar_type(), torch::kFloat);
     EXPECT_TRUE(got.device().is_cpu());
     EXPECT_EQ(got.size(2), enc.dim());
-    EXPECT_LE(rel_err(got, want), 1e-5) << variant;
+    EXPECT_LE(test::rel_err(got, want), 1e-5) << variant;
     // Each caption on its own too, so one row's error is not hidden by the others.
     for (int64_t i = 0; i < got.size(0); ++i) {
       if (!mask[i].any().item<bool>()) continue;  // the empty caption: zeros on both sides
-      EXPECT_LE(rel_err(got[i], want[i]), 1e-5) << variant << " row " << i;
+      EXPECT_LE(test::rel_err(got[i], want[i]), 1e-5) << variant << " row " << i;
     }
     // Padded positions and the empty caption are exactly zero.
     EXPECT_EQ(got.masked_select(mask.logical_not().unsqueeze(-1)).abs().max().item<float>(), 0.0f);

@@ -1,5 +1,7 @@
 #pragma once
 // Shared test helpers: a scratch directory per test, running the gaia binary, and locating the real clips.
+// The test files compile in batches (GAIA_UNITY_BUILD): a helper two files need lives here, and a file's own helpers
+// (and `using` lines) must not clash with another file's names.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -7,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdlib>
 #include <cstdio>
@@ -16,7 +19,9 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <torch/torch.h>
 
+#include "gaia/config.h"
 #include "gaia/core/error.h"
 #include "gaia/core/fs.h"
 #ifndef GAIA_NO_VIDEO
@@ -165,6 +170,32 @@ inline fs::path real_data_dir() {
   for (fs::path p = source_dir(); !p.empty() && p != p.root_path(); p = p.parent_path())
     if (fs::exists(p / "shared" / "data" / "real")) return p / "shared" / "data" / "real";
   return {};
+}
+
+// A config of the repository's configs/ (tiny.yaml, ...).
+inline Config config(const std::string& name) { return Config::load(source_dir() / "configs" / name); }
+
+// ||a - b|| / ||b||: how far a computation is from its peer's.
+inline double rel_err(const torch::Tensor& a, const torch::Tensor& b) {
+  return ((a - b).norm() / (b.norm() + 1e-12)).item<double>();
+}
+
+// How many times `needle` occurs in `hay` (overlapping occurrences counted).
+inline int occurrences(const std::string& hay, const std::string& needle) {
+  int n = 0;
+  for (size_t at = hay.find(needle); at != std::string::npos; at = hay.find(needle, at + 1)) ++n;
+  return n;
+}
+
+// Exactly one line that starts with "gaia: error:" and names `what`; exit status `status` (any non-zero if 0).
+inline void expect_one_error_line(const RunResult& r, const std::string& what, int status = 0) {
+  if (status) {
+    EXPECT_EQ(r.status, status) << r.output;
+  }
+  EXPECT_NE(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.rfind("gaia: error: ", 0), 0u) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_NE(r.output.find(what), std::string::npos) << "wanted '" << what << "' in: " << r.output;
 }
 
 }  // namespace gaia::test

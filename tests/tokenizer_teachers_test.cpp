@@ -49,7 +49,7 @@ std::set<std::string> named(const Weights& w, const std::vector<std::string>& pr
   return out;
 }
 
-Config tiny() {
+Config teachers_config() {
   Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
   c.tokenizer.disc_start = 1000000;  // the GAN term is not the subject here (the resume test turns it on)
   return c;
@@ -58,7 +58,7 @@ Config tiny() {
 // Every loss weight 0 (the test turns one teacher's on), no weight decay, no warm-up: one AdamW step then moves a
 // tensor by a bit exactly when the weighted terms' gradient reaches it.
 Config isolated() {
-  Config c = tiny();
+  Config c = teachers_config();
   auto& t = c.tokenizer;
   t.w_l1 = t.w_l2 = t.w_perceptual = t.w_gan = t.w_codebook = t.w_dino = 0;
   t.weight_decay = 0;
@@ -117,7 +117,7 @@ bool has_note(const tokenizer::TrainResult& r, const std::string& text) {
 
 TEST(TokenizerTeachers, PerceptualTermIsInTheLossAtItsWeight) {
   Scratch s;
-  const Config c = tiny();
+  const Config c = teachers_config();
   ASSERT_EQ(c.tokenizer.w_perceptual, 0.1);  // §4.1, from the defaults (tiny.yaml does not set it)
   const TrainRun plain = run_training(c, s.options("plain", 3));
   const TrainRun taught = run_training(c, s.options("vgg", 3, fixture("vgg16_narrow.safetensors")));
@@ -198,7 +198,7 @@ TEST(TokenizerTeachers, DinoGradientReachesTheEncoderAndHeadNotTheDecoder) {
 
 TEST(TokenizerTeachers, DinoTermIsInTheLossAtItsWeight) {
   Scratch s;
-  const Config c = tiny();
+  const Config c = teachers_config();
   ASSERT_EQ(c.tokenizer.w_dino, 0.1);  // §4.1, from the defaults
   const TrainRun plain = run_training(c, s.options("plain", 2));
   const TrainRun taught = run_training(c, s.options("dino", 2, {}, fixture("vit_timm.safetensors")));
@@ -239,7 +239,7 @@ TEST(TokenizerTeachers, TeachersAreFrozenAndPassTheGradientToTheirInput) {
 // bits as a straight one, and the resumed steps log the same loss terms.
 TEST(TokenizerTeachers, ResumeIsExactWithBothTeachers) {
   Scratch s;
-  Config c = tiny();
+  Config c = teachers_config();
   c.tokenizer.disc_start = 2;
   const fs::path vgg = fixture("vgg16_narrow.safetensors"), dino = fixture("vit_timm.safetensors");
   auto o = s.options("straight", 6, vgg, dino);
@@ -285,7 +285,7 @@ TEST(TokenizerTeachers, PaperLossWeightsAreTheDefaultsInEveryShippedConfig) {
 // not a long run without the loss that was asked for.
 TEST(TokenizerTeachers, NamedTeacherFileThatDoesNotExistIsAnError) {
   Scratch s;
-  const Config c = tiny();
+  const Config c = teachers_config();
   for (const bool decoder_only : {false, true}) {
     auto o = s.options("run", 1, s.dir / "vgg-typo.safetensors");
     o.decoder_only = decoder_only;

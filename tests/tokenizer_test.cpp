@@ -12,7 +12,6 @@ using namespace gaia;
 using namespace gaia::tokenizer;
 
 namespace {
-Config load(const std::string& name) { return Config::load(test::source_dir() / "configs" / name); }
 }  // namespace
 
 TEST(Quantizer, PicksNearestCodeAndPassesGradientsStraightThrough) {
@@ -57,7 +56,7 @@ TEST(Quantizer, DeadCodeRestartReplacesUnusedCodes) {
 
 TEST(Tokenizer, ShapesAndParameterCountsMatchPlanForEveryConfig) {
   for (auto name : {"tiny.yaml", "default.yaml"}) {
-    Config c = load(name);
+    Config c = test::config(name);
     ImageTokenizer t(c);
     EXPECT_EQ(t->parameter_count(), sizing::tokenizer_params(c).total) << name;
     PatchDiscriminator d(c.tokenizer);
@@ -77,7 +76,7 @@ TEST(Tokenizer, ShapesAndParameterCountsMatchPlanForEveryConfig) {
 }
 
 TEST(Tokenizer, WrongResolutionIsAClearError) {
-  Config c = load("tiny.yaml");
+  Config c = test::config("tiny.yaml");
   ImageTokenizer t(c);
   try {
     t->encode(torch::zeros({1, 3, 48, 64}));
@@ -97,9 +96,6 @@ torch::Tensor fixture(const std::string& file, const std::string& name) {
   SafetensorsFile f(test::source_dir() / "tests" / "fixtures" / file);
   return tensor_from_view(f.get(name));
 }
-double rel_err(const torch::Tensor& a, const torch::Tensor& b) {
-  return ((a - b).norm() / (b.norm() + 1e-12)).item<double>();
-}
 }  // namespace
 
 TEST(Teachers, Vgg16MatchesTorchvision) {
@@ -110,7 +106,7 @@ TEST(Teachers, Vgg16MatchesTorchvision) {
   for (int i = 0; i < 5; ++i) {
     auto want = fixture("vgg16_narrow_io.safetensors", "relu" + std::to_string(i));
     ASSERT_EQ(taps[static_cast<size_t>(i)].sizes(), want.sizes()) << i;
-    EXPECT_LE(rel_err(taps[static_cast<size_t>(i)], want), 1e-4) << "relu tap " << i;
+    EXPECT_LE(test::rel_err(taps[static_cast<size_t>(i)], want), 1e-4) << "relu tap " << i;
   }
 }
 
@@ -124,7 +120,7 @@ TEST(Teachers, DinoViTMatchesTorchvisionInBothLayouts) {
     torch::NoGradGuard ng;
     auto got = vit->forward(x);
     ASSERT_EQ(got.sizes(), want.sizes()) << file;
-    EXPECT_LE(rel_err(got, want), 1e-4) << file;
+    EXPECT_LE(test::rel_err(got, want), 1e-4) << file;
     // Other resolutions interpolate the position grid (DINO's behaviour).
     EXPECT_EQ(vit->forward(torch::zeros({1, 3, 48, 64})).sizes(), (std::vector<int64_t>{1, 16, 6, 8}));
   }

@@ -28,7 +28,7 @@ using namespace gaia;
 
 namespace {
 
-Config tiny() {
+Config checkpointing_config() {
   Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
   c.run.checkpoint_every = 10;
   return c;
@@ -43,7 +43,7 @@ void train_two_steps(const fs::path& dataset, const fs::path& run) {
   o.dataset = dataset;
   o.out = run;
   o.steps = 2;
-  tokenizer::train_tokenizer(tiny(), o);
+  tokenizer::train_tokenizer(checkpointing_config(), o);
 }
 
 }  // namespace
@@ -51,7 +51,7 @@ void train_two_steps(const fs::path& dataset, const fs::path& run) {
 TEST(TokenizerTrain, OverfitsAFewFramesToHighPsnr) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 0.2);  // 2 x 5 frames; one episode trains, one validates -> train on 5 frames
-  Config c = tiny();
+  Config c = checkpointing_config();
   c.tokenizer.lr = 3e-3;
   c.tokenizer.final_lr = 3e-3;
   c.tokenizer.warmup_steps = 0;
@@ -91,7 +91,7 @@ TEST(TokenizerTrain, OverfitsAFewFramesToHighPsnr) {
 TEST(TokenizerTrain, ResumeIsExact) {
   test::TempDir dir;
   make_dataset(dir / "ds", 3, 0.4);
-  Config c = tiny();
+  Config c = checkpointing_config();
   c.tokenizer.disc_start = 6;  // the GAN path and its optimiser are part of the resumed state too
   tokenizer::TrainOptions o;
   o.dataset = dir / "ds";
@@ -120,7 +120,7 @@ TEST(TokenizerTrain, ResumeIsExact) {
 TEST(TokenizerTrain, InitFineTunesFromWeightsAndBalancesTheGanGradient) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 0.4);
-  Config c = tiny();
+  Config c = checkpointing_config();
   c.tokenizer.disc_start = 0;
   tokenizer::TrainOptions o;
   o.dataset = dir / "ds";
@@ -161,7 +161,7 @@ TEST(TokenizerTrain, DecoderOnlyGrowsRefineAndTokenBlocksAndKeepsEveryCode) {
   make_dataset(dir / "ds", 2, 0.4);
   train_two_steps(dir / "ds", dir / "base");
   auto base = tokenizer::load_tokenizer(dir / "base" / "tokenizer.safetensors", torch::kCPU);
-  Config g = tiny();
+  Config g = checkpointing_config();
   g.tokenizer.refine_blocks = 2;
   g.tokenizer.token_blocks = 1;
   g.tokenizer.disc_start = 1000000;
@@ -224,7 +224,7 @@ TEST(TokenizerTrain, EmaAveragesTheDecoderResumesExactlyAndKeepsTheCodes) {
   test::TempDir dir;
   make_dataset(dir / "ds", 2, 0.4);
   train_two_steps(dir / "ds", dir / "base");
-  Config g = tiny();
+  Config g = checkpointing_config();
   g.tokenizer.disc_start = 1000000;
   g.tokenizer.ema_decay = 0.9;
   g.tokenizer.lr = g.tokenizer.final_lr = 2e-3;

@@ -19,11 +19,6 @@ using namespace gaia;
 using test::q;
 
 namespace {
-int count(const std::string& s, const std::string& what) {
-  int n = 0;
-  for (size_t at = s.find(what); at != std::string::npos; at = s.find(what, at + 1)) ++n;
-  return n;
-}
 }  // namespace
 
 TEST(TrainAllSlow, RunsEveryStageShipsAndResumes) {
@@ -113,7 +108,7 @@ TEST(TrainAllSlow, RunsEveryStageShipsAndResumes) {
   // Again: nothing left to do.
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 21) << r.output;
+  EXPECT_EQ(test::occurrences(r.output, "skipped"), 21) << r.output;
   // A bad config key fails before any stage starts, naming the key.
   r = test::run_gaia("train-all --set world.bogus=1 --out " + q(d / "x"));
   EXPECT_NE(r.status, 0);
@@ -146,7 +141,7 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
   EXPECT_TRUE(fs::exists(d / "runs" / "data" / "episodes" / "synth-s1-e00000" / "episode.json"));
   r = test::run_gaia(cmd);
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_EQ(count(r.output, "skipped"), 10) << r.output;  // data, synth, five trainers and steps, three copies
+  EXPECT_EQ(test::occurrences(r.output, "skipped"), 10) << r.output;  // data, synth, five trainers and steps, three copies
   // Fine-tuning the models just shipped with --new-codes: the tokenizer's encoder and codebook learn too (without
   // it, --decoder-only keeps every code; a warm-up's first steps move them little, but they move).
   r = test::run_gaia("train-all --data " + q(d / "mine") + " --from " + q(d / "models") + " --new-codes --synth 1" +
@@ -154,6 +149,15 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
                      q(d / "tuned"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("--decoder-only"), std::string::npos) << r.output;
+  {
+    // The world model starts from the shipped one but is not held to its predictions: those are of the old codes.
+    const auto log = nlohmann::json::parse(read_file(d / "tuned" / "train-all.json"));
+    std::string world;
+    for (const auto& stage : log)
+      if (stage["command"].get<std::string>().find("world train") != std::string::npos) world = stage["command"];
+    EXPECT_NE(world.find("--init"), std::string::npos) << world;
+    EXPECT_EQ(world.find("--distill-from"), std::string::npos) << world;
+  }
   {
     SafetensorsFile before(d / "models" / "tokenizer.safetensors"),
         after(d / "tuned" / "tokenizer" / "tokenizer.safetensors");

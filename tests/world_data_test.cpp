@@ -30,7 +30,6 @@ using gaia::text::Vocab;
 using gaia::world::Conditioning;
 using gaia::world::ConditioningMix;
 using gaia::world::TokenDataset;
-using gaia::world::Window;
 using gaia::world::WindowSampler;
 using gaia::world::WorldBatch;
 using nlohmann::json;
@@ -150,7 +149,7 @@ TEST(WorldData, BatchHasTokensNormalisedActionsAndText) {
   Vocab v = world::build_vocab(ds, {0, 1, 2}, 64);
   EXPECT_EQ(v.id("a"), 2);  // "a", "road", "step" are in every caption; ties go alphabetically
   EXPECT_EQ(v.id("step"), 4);
-  std::vector<Window> ws{{0, 1, 4}, {2, 6, 4}};
+  std::vector<world::Window> ws{{0, 1, 4}, {2, 6, 4}};
   std::mt19937_64 rng(7);
   WorldBatch b = ds.make_batch(ws, &v, 3, ConditioningMix{}, rng);
   EXPECT_EQ(b.tokens.sizes(), (std::vector<int64_t>{2, 4, kN}));
@@ -281,7 +280,7 @@ TEST(WorldData, WindowsNeverCrossEpisodes) {
   TokenDataset ds(make_small(dir));  // 8, 3 and 10 steps
   auto ws = ds.windows({0, 1, 2}, 4, 2);
   // e0: starts 0, 2, 4; e1: none (3 < 4); e2: 0, 2, 4, 6.
-  std::vector<Window> want{{0, 0, 4}, {0, 2, 4}, {0, 4, 4}, {2, 0, 4}, {2, 2, 4}, {2, 4, 4}, {2, 6, 4}};
+  std::vector<world::Window> want{{0, 0, 4}, {0, 2, 4}, {0, 4, 4}, {2, 0, 4}, {2, 2, 4}, {2, 4, 4}, {2, 6, 4}};
   EXPECT_EQ(ws, want);
   for (auto& w : ds.windows({0, 1, 2}, 3, 1)) EXPECT_LE(w.start + w.steps, ds.steps(w.episode));
   EXPECT_EQ(ds.windows({0, 1, 2}, 3, 1).size(), 6u + 1u + 8u);
@@ -294,7 +293,7 @@ TEST(WorldData, ConditioningModesFollowTheMix) {
   test::TempDir dir;
   TokenDataset ds(make_small(dir));
   Vocab v = world::build_vocab(ds, {0}, 32);
-  std::vector<Window> ws(5000, Window{0, 0, 4});
+  std::vector<world::Window> ws(5000, world::Window{0, 0, 4});
   std::mt19937_64 rng(11);
   Config c;  // paper §4.2: 20 / 40 / 40
   WorldBatch b = ds.make_batch(ws, &v, 2, ConditioningMix::from(c.world), rng);
@@ -327,7 +326,7 @@ TEST(WorldData, CounterfactualReplaysDrawTheirOwnActionShare) {
   const int64_t n = 6000;
   auto shares = [&](size_t episode, const ConditioningMix& mix, uint64_t seed) {
     std::mt19937_64 rng(seed);
-    WorldBatch b = ds.make_batch(std::vector<Window>(n, Window{episode, 0, 4}), &v, 2, mix, rng);
+    WorldBatch b = ds.make_batch(std::vector<world::Window>(n, world::Window{episode, 0, 4}), &v, 2, mix, rng);
     EXPECT_EQ((b.use_action & b.use_text).sum().item<int64_t>(), 0);
     double a = b.use_action.sum().item<int64_t>() / double(n), t = b.use_text.sum().item<int64_t>() / double(n);
     return std::make_tuple(1 - a - t, a, t, b);

@@ -22,14 +22,13 @@ using namespace gaia::world;
 
 namespace {
 
-Config tiny() { return Config::load(test::source_dir() / "configs" / "tiny.yaml"); }
 
-constexpr int64_t kN = 6, kK = 32;
+constexpr int64_t kModelN = 6, kModelK = 32;
 
 // On GAIA_TEST_DEVICE (scripts/gpu-check.sh: CUDA), with its batches.
 WorldModel small_model(const Config& c, uint64_t seed = 0) {
   torch::manual_seed(seed);
-  WorldModel m(c.world, kN, kK);
+  WorldModel m(c.world, kModelN, kModelK);
   m->to(torch::Device(test::device_name()));
   m->eval();
   return m;
@@ -38,7 +37,7 @@ WorldModel small_model(const Config& c, uint64_t seed = 0) {
 WorldBatch random_batch(const Config& c, int64_t B, int64_t T, uint64_t seed = 1) {
   torch::manual_seed(seed);
   WorldBatch b;
-  b.tokens = torch::randint(0, kK, {B, T, kN}, torch::kLong);
+  b.tokens = torch::randint(0, kModelK, {B, T, kModelN}, torch::kLong);
   b.actions = torch::randn({B, T, 2});
   b.text_ids = torch::randint(0, c.world.text_vocab, {B, T, c.world.text_tokens}, torch::kLong);
   return b.to(torch::Device(test::device_name()));
@@ -47,7 +46,7 @@ WorldBatch random_batch(const Config& c, int64_t B, int64_t T, uint64_t seed = 1
 }  // namespace
 
 TEST(WorldModel, LogitsAreCausal) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c);
   torch::NoGradGuard ng;
   auto b = random_batch(c, 1, 3);
@@ -55,12 +54,12 @@ TEST(WorldModel, LogitsAreCausal) {
   // Change image token z_{1,2}: logits of every token predicted before it stay, the ones after it move.
   auto b2 = b;
   b2.tokens = b.tokens.clone();
-  b2.tokens[0][1][2] = (b.tokens[0][1][2].item<int64_t>() + 1) % kK;
+  b2.tokens[0][1][2] = (b.tokens[0][1][2].item<int64_t>() + 1) % kModelK;
   auto changed = m->forward(b2);
   const auto& L = m->layout;
   const int64_t pos = L.flat(1, L.image_slot(2));
   for (int64_t t = 0; t < 3; ++t)
-    for (int64_t i = 0; i < kN; ++i) {
+    for (int64_t i = 0; i < kModelN; ++i) {
       bool same = torch::allclose(base[0][t][i], changed[0][t][i], 0, 0);
       if (L.predictor(t, i) < pos) EXPECT_TRUE(same) << "t " << t << " i " << i;
       else EXPECT_FALSE(same) << "t " << t << " i " << i;
@@ -75,30 +74,30 @@ TEST(WorldModel, LogitsAreCausal) {
 }
 
 TEST(WorldModel, LossIsOnImageTokensOnly) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c);
   torch::NoGradGuard ng;
   auto b = random_batch(c, 2, 2);
   auto logits = m->forward(b);
-  ASSERT_EQ(logits.sizes(), (std::vector<int64_t>{2, 2, kN, kK}));
+  ASSERT_EQ(logits.sizes(), (std::vector<int64_t>{2, 2, kModelN, kModelK}));
   // The same numbers from the head over every position, gathered at the image-token predictors by hand.
   auto all = m->logits(m->body(m->embed(b)));  // [B, T * S, K]
   double manual = 0;
   const auto& L = m->layout;
   for (int64_t bb = 0; bb < 2; ++bb)
     for (int64_t t = 0; t < 2; ++t)
-      for (int64_t i = 0; i < kN; ++i) {
+      for (int64_t i = 0; i < kModelN; ++i) {
         auto lp = torch::log_softmax(all[bb][L.predictor(t, i)], -1);
         manual -= lp[b.tokens[bb][t][i].item<int64_t>()].item<double>();
       }
-  manual /= 2 * 2 * kN;
+  manual /= 2 * 2 * kModelN;
   EXPECT_NEAR(image_token_loss(logits, b.tokens).item<double>(), manual, 1e-5);
   // A random model starts near log K.
-  EXPECT_NEAR(manual, std::log(double(kK)), 0.5);
+  EXPECT_NEAR(manual, std::log(double(kModelK)), 0.5);
 }
 
 TEST(WorldModel, KvCacheMatchesFullForward) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c);
   torch::NoGradGuard ng;
   auto b = random_batch(c, 2, c.world.context_steps);
@@ -138,17 +137,17 @@ static void sharpen(WorldModel& m, double by = 6.0) {
 // a cache already holding a prefix; long appends attend block by block (transformer.cpp), checked against the
 // uncached causal forward.
 TEST(WorldModel, PrefillFillsTheCacheAsTheBodyDoes) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   c.world.context_steps = 8;
   torch::manual_seed(3);
-  WorldModel m(c.world, /*n=*/60, kK);  // 8 steps x 64 slots: 512 positions, appends past the query block
+  WorldModel m(c.world, /*n=*/60, kModelK);  // 8 steps x 64 slots: 512 positions, appends past the query block
   m->to(torch::Device(test::device_name()));
   m->eval();
   sharpen(m);
   torch::NoGradGuard ng;
   torch::manual_seed(4);
   WorldBatch b;
-  b.tokens = torch::randint(0, kK, {2, 8, 60}, torch::kLong);
+  b.tokens = torch::randint(0, kModelK, {2, 8, 60}, torch::kLong);
   b.actions = torch::randn({2, 8, 2});
   b = b.to(torch::Device(test::device_name()));
   auto x = m->embed(b);  // [2, 512, d]
@@ -174,7 +173,7 @@ TEST(WorldModel, PrefillFillsTheCacheAsTheBodyDoes) {
 // Sampling's fused per-token path against the general one (body, then logits), token by token on caches holding the
 // same prefix: the same logits and the same cache contents, for one row and for guidance's two.
 TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 5);
   if (!m->token_embedding->weight.device().is_cpu()) GTEST_SKIP() << "the fused token step is the CPU's";
   sharpen(m);
@@ -195,8 +194,8 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
     m->body(x, &fused);
     torch::manual_seed(6);
     double worst = 0, spread = 0, size = 0;  // the largest difference, relative to the largest logit
-    for (int64_t i = 0; i < kN; ++i) {  // step t = 2's image tokens
-      auto tok = torch::randint(0, kK, {B}, torch::kLong);
+    for (int64_t i = 0; i < kModelN; ++i) {  // step t = 2's image tokens
+      auto tok = torch::randint(0, kModelK, {B}, torch::kLong);
       auto want = m->logits(m->body(m->embed_image(tok.view({B, 1, 1}), 2, i).view({B, 1, m->d}), &general).select(1, 0));
       auto got = fast.logits(tok, 2, i, fused);
       ASSERT_EQ(got.sizes(), want.sizes());
@@ -220,7 +219,7 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
     auto x = m->embed(b);
     auto batch = m->make_cache(4, m->layout.length());
     m->body(x, &batch);
-    auto tok = torch::randint(0, kK, {4}, torch::kLong);
+    auto tok = torch::randint(0, kModelK, {4}, torch::kLong);
     std::vector<KVCache> alone(4);
     for (int64_t r = 0; r < 4; ++r) {  // the batch's own prefix, row r
       alone[size_t(r)] = batch;
@@ -238,7 +237,7 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
   small.length = 3;
   EXPECT_THROW(fast.logits(torch::zeros({1}, torch::kLong), 0, 0, small), std::exception);  // full cache
   auto roomy = m->make_cache(1, 8);
-  EXPECT_THROW(fast.logits(torch::full({1}, kK, torch::kLong), 0, 0, roomy), std::exception);  // id >= K
+  EXPECT_THROW(fast.logits(torch::full({1}, kModelK, torch::kLong), 0, 0, roomy), std::exception);  // id >= K
 }
 
 TEST(WorldModel, ParameterCountEqualsThePlan) {
@@ -253,7 +252,7 @@ TEST(WorldModel, ParameterCountEqualsThePlan) {
 // linear-action model changes nothing until it trains), and once trained the embedding is no longer affine in the
 // action, which is what it is for.
 TEST(WorldModel, ActionMlpStartsAtTheLinearEmbeddingAndBends) {
-  Config c = tiny(), cm = tiny();
+  Config c = test::config("tiny.yaml"), cm = test::config("tiny.yaml");
   cm.world.action_mlp = 8;
   WorldModel with(cm.world, cm.image_tokens(), cm.tokenizer.codebook_size);
   EXPECT_EQ(with->parameter_count(false), sizing::world_params(cm).total);
@@ -280,7 +279,7 @@ TEST(WorldModel, ActionMlpStartsAtTheLinearEmbeddingAndBends) {
   // Left and right are no longer one direction with opposite signs.
   EXPECT_GT((e[4] - e[2] + (e[0] - e[2])).abs().max().item<double>(), 1e-3);
   EXPECT_LT((el[4] - el[2] + (el[0] - el[2])).abs().max().item<double>(), 1e-5);
-  Config bad = tiny();
+  Config bad = test::config("tiny.yaml");
   bad.world.action_mlp = -1;
   EXPECT_THROW(bad.validate(), std::exception);
 }
@@ -401,12 +400,12 @@ TEST(WorldSampling, KeepTopKRanksByAnotherTensor) {
 // Every generated frame must be the argmax of a full forward over the window the sampler saw: the last T steps
 // (or all steps before the window fills). This checks the KV cache and the sliding window's re-indexed positions.
 TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 5);
   const int64_t T = c.world.context_steps, P = 2, F = T + 3;
   RolloutPrompt p;
   torch::manual_seed(9);
-  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.tokens = torch::randint(0, kModelK, {P, kModelN}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
   const int threads = at::get_num_threads();
@@ -420,7 +419,7 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
   o.sampling.strategy = Strategy::Argmax;
   o.window_stride = stride;
   auto r = rollout(m, p, o);
-  ASSERT_EQ(r.tokens.sizes(), (std::vector<int64_t>{1, P + F, kN}));
+  ASSERT_EQ(r.tokens.sizes(), (std::vector<int64_t>{1, P + F, kModelN}));
   EXPECT_TRUE(torch::equal(r.tokens[0].narrow(0, 0, P), p.tokens));
   torch::NoGradGuard ng;
   int64_t k0 = 0;  // first step of the window frame k sees: it drops `stride` steps when T are in it
@@ -446,16 +445,16 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
 // The lookahead (the next window's history encoded on a second thread) gives the plain path's tokens, and a copy
 // made while it runs (a fork) continues exactly as the original: top-k draws, past the window several times.
 TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   const int64_t n = 100;  // the newest step goes to the second thread in three chunks
   torch::manual_seed(5);
-  WorldModel m(c.world, n, kK);
+  WorldModel m(c.world, n, kModelK);
   m->eval();
   sharpen(m, 3.0);
   const int64_t T = c.world.context_steps, P = 2, F = 3 * T;
   RolloutPrompt p;
   torch::manual_seed(9);
-  p.tokens = torch::randint(0, kK, {P, n}, torch::kLong);
+  p.tokens = torch::randint(0, kModelK, {P, n}, torch::kLong);
   p.actions = torch::randn({P + F, 2});
   const int threads = at::get_num_threads();
   at::set_num_threads(1);
@@ -483,7 +482,7 @@ TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
 }
 
 TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 6);
   const int64_t F = 3;
   RolloutPrompt p;
@@ -518,7 +517,7 @@ namespace {
 RolloutPrompt action_prompt(int64_t P, int64_t F, uint64_t seed, double scale) {
   torch::manual_seed(seed);
   RolloutPrompt p;
-  p.tokens = torch::randint(0, kK, {P, kN}, torch::kLong);
+  p.tokens = torch::randint(0, kModelK, {P, kModelN}, torch::kLong);
   p.actions = torch::randn({P + F, 2}) * scale;
   return p;
 }
@@ -528,7 +527,7 @@ RolloutPrompt action_prompt(int64_t P, int64_t F, uint64_t seed, double scale) {
 // Guidance on the actions alone (no text; `gaia eval --action-guidance`): the unconditional rows see null action
 // tokens, so the guided frame is the argmax of eq. 2 over two plain forward passes, with and without the actions.
 TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
   const double s = 2;
@@ -551,7 +550,7 @@ TEST(WorldRollout, ActionGuidanceContrastsWithNullActions) {
 // Negative actions (`gaia eval --action-negative mirror`): the unconditional rows see them instead of null actions,
 // so the guided frame is eq. 2's argmax between the command and its mirror image.
 TEST(WorldRollout, NegativeActionsReplaceTheNullOnes) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
   RolloutPrompt p = action_prompt(P, F, 7, 10);
@@ -583,7 +582,7 @@ TEST(WorldRollout, NegativeActionsReplaceTheNullOnes) {
 // candidate is the conditional argmax, whatever the guided logits say; unconstrained, or when the guidance contrasts
 // text too, top-1 of the guided logits is eq. 2's argmax.
 TEST(WorldRollout, ActionGuidanceStaysWithinTheConditionalTopK) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 6);
   const int64_t P = 2, F = 1;
   RolloutPrompt p = action_prompt(P, F, 5, 3);
@@ -616,12 +615,12 @@ TEST(WorldRollout, ActionGuidanceStaysWithinTheConditionalTopK) {
 // One batched rollout with a prompt, actions and text per future gives what separate rollouts give (argmax), with
 // and without guidance, including across the sliding window: evaluation runs many prompts x commands this way.
 TEST(WorldRollout, PerFuturePromptsMatchSeparateRollouts) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 8);
   const int64_t N = 3, P = 2, F = c.world.context_steps, m_txt = c.world.text_tokens;
   torch::manual_seed(11);
   RolloutPrompt batched;
-  batched.tokens = torch::randint(0, kK, {N, P, kN}, torch::kLong);
+  batched.tokens = torch::randint(0, kModelK, {N, P, kModelN}, torch::kLong);
   batched.actions = torch::randn({N, P + F, 2});
   batched.text_ids = torch::randint(2, c.world.text_vocab, {N, P + F, m_txt}, torch::kLong);
   for (double scale : {0.0, 2.0}) {
@@ -631,7 +630,7 @@ TEST(WorldRollout, PerFuturePromptsMatchSeparateRollouts) {
     o.sampling.strategy = Strategy::Argmax;
     o.guidance.scale = scale;
     auto all = rollout(m, batched, o);
-    ASSERT_EQ(all.tokens.sizes(), (std::vector<int64_t>{N, P + F, kN}));
+    ASSERT_EQ(all.tokens.sizes(), (std::vector<int64_t>{N, P + F, kModelN}));
     o.futures = 1;
     for (int64_t i = 0; i < N; ++i) {
       RolloutPrompt one;
@@ -651,22 +650,22 @@ TEST(WorldRollout, PerFuturePromptsMatchSeparateRollouts) {
 }
 
 TEST(WorldRollout, BadPromptsAreClearErrors) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c);
   RolloutOptions o;
   o.frames = 2;
   RolloutPrompt p;
-  p.tokens = torch::zeros({c.world.context_steps + 1, kN}, torch::kLong);
+  p.tokens = torch::zeros({c.world.context_steps + 1, kModelN}, torch::kLong);
   EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("context"), std::string::npos);
-  p.tokens = torch::full({1, kN}, kK, torch::kLong);
+  p.tokens = torch::full({1, kModelN}, kModelK, torch::kLong);
   EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("K = 32"), std::string::npos);
-  p.tokens = torch::zeros({1, kN}, torch::kLong);
+  p.tokens = torch::zeros({1, kModelN}, torch::kLong);
   p.actions = torch::zeros({2, 2});  // needs 1 + 2 rows
   EXPECT_NE(test::error_of([&] { rollout(m, p, o); }).find("actions has 2 rows"), std::string::npos);
 }
 
 TEST(WorldModel, ActivationCheckpointingGivesTheSameGradients) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto grads = [&](bool ckpt) {
     Config cc = c;
     cc.world.activation_checkpointing = ckpt;
@@ -693,7 +692,7 @@ TEST(WorldModel, ActivationCheckpointingGivesTheSameGradients) {
 // world.copy_bias adds exactly b to the logit of the code each position held one frame earlier, and nothing else;
 // the first frame of the window has no earlier frame in view. A large bias makes a sampled rollout repeat the prompt.
 TEST(WorldModel, CopyBiasRaisesOnlyThePreviousFramesCode) {
-  Config c = tiny();
+  Config c = test::config("tiny.yaml");
   auto m = small_model(c, 2);
   torch::NoGradGuard ng;
   auto b = random_batch(c, 2, 3);
@@ -703,12 +702,12 @@ TEST(WorldModel, CopyBiasRaisesOnlyThePreviousFramesCode) {
   auto want = torch::zeros_like(base);
   for (int64_t x = 0; x < 2; ++x)
     for (int64_t t = 1; t < 3; ++t)
-      for (int64_t i = 0; i < kN; ++i) want[x][t][i][b.tokens[x][t - 1][i].item<int64_t>()] = 0.75;
+      for (int64_t i = 0; i < kModelN; ++i) want[x][t][i][b.tokens[x][t - 1][i].item<int64_t>()] = 0.75;
   EXPECT_TRUE(torch::allclose(biased - base, want, 0, 1e-5));
 
   m->cfg.copy_bias = 100;
   RolloutPrompt p;
-  p.tokens = torch::randint(0, kK, {2, kN}, torch::kLong);
+  p.tokens = torch::randint(0, kModelK, {2, kModelN}, torch::kLong);
   RolloutOptions o;
   o.frames = 3;
   o.futures = 2;

@@ -17,9 +17,6 @@ namespace {
 
 fs::path peer_dir() { return test::source_dir() / "tests" / "fixtures" / "world_peer"; }
 
-double rel_err(const torch::Tensor& a, const torch::Tensor& b) {
-  return ((a - b).norm() / (b.norm() + 1e-12)).item<double>();
-}
 
 }  // namespace
 
@@ -54,7 +51,7 @@ TEST(WorldPeer, LogitsAndLossMatchThePyTorchPeer) {
   auto logits = m->forward(b);
   ASSERT_EQ(logits.sizes(), want_logits.sizes());
   EXPECT_TRUE(torch::isfinite(logits).all().item<bool>());
-  EXPECT_LE(rel_err(logits, want_logits), 1e-4);
+  EXPECT_LE(test::rel_err(logits, want_logits), 1e-4);
 
   const double want_loss = get("loss").item<double>();
   EXPECT_NEAR(image_token_loss(logits, b.tokens).item<double>(), want_loss, 1e-5);

@@ -369,8 +369,9 @@ void register_train_all(CLI::App& app) {
       if (!base.empty()) {
         const std::string w = (base / "world.safetensors").string();
         wa.insert(wa.end(), {"--init", w, "--set", "world.lr=2e-4", "--set", "world.warmup_steps=50"});
-        // Procedural windows held to the model fine-tuned, which knows that world; real ones learn freely.
-        if (lane > 0) wa.insert(wa.end(), {"--distill-from", w, "--distill-procedural-only"});
+        // Procedural windows held to the model fine-tuned, which knows that world; real ones learn freely. Not with
+        // --new-codes: that model predicts the old codes, and most token ids name another code after the fine-tune.
+        if (lane > 0 && !*new_codes) wa.insert(wa.end(), {"--distill-from", w, "--distill-procedural-only"});
       }
       if (lane > 0)  // footage a balancing feature: real windows drawn as often as sqrt of their share allows
         wa.insert(wa.end(), {"--set", "data.balance_world=[footage,latitude,longitude,weather,steering,speed]"});

@@ -9,15 +9,14 @@
 
 #include "gaia/core/civil_time.h"
 #include "gaia/core/error.h"
+#include "gaia/core/numbers.h"
 
 namespace gaia::data {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kEarthRadius = 6371000.0;  // metres, mean
 constexpr double kKnot = 1852.0 / 3600.0;   // m/s
-constexpr double kPi = 3.14159265358979323846;
 
 bool to_double(const std::string& s, double* out) {
   if (s.empty()) return false;

@@ -11,12 +11,12 @@
 
 #include "gaia/core/civil_time.h"
 #include "gaia/core/error.h"
+#include "gaia/core/numbers.h"
 
 namespace gaia::data {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 const char* const kCameras[] = {"image_02", "image_03", "image_00", "image_01"};
 
 // The non-blank lines, without trailing spaces or carriage returns.

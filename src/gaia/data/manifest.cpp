@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/text.h"
 #include "gaia/core/hash.h"
 #include "gaia/data/ingest.h"
 #include "gaia/data/signals.h"
@@ -24,12 +25,6 @@ const std::vector<std::string>& manifest_values(const std::string& column) {
 }
 
 namespace {
-
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r");
-  if (b == std::string::npos) return "";
-  return s.substr(b, s.find_last_not_of(" \t\r") - b + 1);
-}
 
 std::string join(const std::vector<std::string>& v) {
   std::string out;

@@ -2,6 +2,8 @@
 
 #include <cctype>
 
+#include "gaia/core/text.h"
+
 namespace gaia::data {
 
 std::string mirrored_id(const std::string& id) { return id + kMirrorSuffix; }
@@ -15,11 +17,6 @@ std::string mirror_source_id(const std::string& id) {
 
 namespace {
 bool is_letter(char c) { return std::isalpha(static_cast<unsigned char>(c)) != 0; }
-
-std::string lower(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
 
 // The word after position `end` (skipping non-letters), lower-cased; "" at the end of the text.
 std::string next_word(const std::string& t, size_t end) {

@@ -13,6 +13,7 @@
 #include <opencv2/video/tracking.hpp>
 
 #include "gaia/core/error.h"
+#include "gaia/core/numbers.h"
 #include "gaia/core/npy.h"
 #include "gaia/data/episode.h"
 
@@ -20,8 +21,6 @@ namespace gaia::data {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr double kPi = 3.14159265358979323846;
 constexpr int kMinTracks = 20;          // fewer tracked corners than this: the frame is too dark, blank or blurred
 constexpr int kMinInliers = 30;         // fewer epipolar inliers: no consistent rigid motion
 constexpr int kMinRoadPoints = 8;       // triangulated points on the fitted road plane

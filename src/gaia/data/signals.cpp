@@ -8,21 +8,12 @@
 #include <sstream>
 
 #include "gaia/core/error.h"
+#include "gaia/core/text.h"
+#include "gaia/core/numbers.h"
 
 namespace gaia::data {
 
 namespace {
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string trim(const std::string& s) {
-  size_t a = s.find_first_not_of(" \t\r"), b = s.find_last_not_of(" \t\r");
-  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
-}
-
-std::string lower(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
 
 // [+-] digits [. digits] [(e|E) [+-] digits], with at least one mantissa digit: what people mean by a number
 // in a CSV. strtod would also take hex, inf, nan and locale forms.

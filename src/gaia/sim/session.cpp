@@ -4,13 +4,13 @@
 
 #include "gaia/core/dtype.h"
 #include "gaia/core/error.h"
+#include "gaia/core/numbers.h"
 #include "gaia/world/batch.h"
 #include "gaia/world/prompt_text.h"
 
 namespace gaia::sim {
 
 namespace {
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // Appends one row to a per-step tensor [k, ...] (undefined: the row alone).
 torch::Tensor append(const torch::Tensor& rows, const torch::Tensor& row) {

@@ -55,7 +55,8 @@ T5Config T5Config::from_json_file(const fs::path& path) {
   return c;
 }
 
-namespace {
+// T5's blocks, in a named namespace because T5Net (declared in t5.h) holds them.
+namespace t5_blocks {
 
 // Relative position (key - query) -> bucket, bidirectional as in T5's encoder (HF's _relative_position_bucket):
 // half the buckets for keys after the query, half for the rest; within each half, distances below a quarter of the
@@ -196,15 +197,15 @@ struct Fnv {
   }
 };
 
-}  // namespace
+}  // namespace t5_blocks
 
 // Parameter names are HF's: shared.weight, encoder.block.{i}.layer.{0,1}...., encoder.final_layer_norm.weight.
 struct T5Net : nn::Module {
   nn::Embedding shared{nullptr};
-  Stack encoder{nullptr};
+  t5_blocks::Stack encoder{nullptr};
   explicit T5Net(const T5Config& c) {
     shared = register_module("shared", nn::Embedding(c.vocab_size, c.d_model));
-    encoder = register_module("encoder", Stack(c));
+    encoder = register_module("encoder", t5_blocks::Stack(c));
   }
   torch::Tensor forward(const torch::Tensor& ids, const torch::Tensor& mask) {  // [B, L] long, [B, L] bool
     const int64_t L = ids.size(1);
@@ -245,7 +246,7 @@ void load_weights(T5Net& net, const SafetensorsFile& file) {
 }
 
 std::string checkpoint_identity(const fs::path& dir, const SafetensorsFile& file, const fs::path& spiece) {
-  Fnv fnv;
+  t5_blocks::Fnv fnv;
   // The header names every tensor with its dtype and shape; the first bytes of each tensor tell fine-tuned weights
   // of the same shapes apart without reading a whole multi-gigabyte file.
   std::ifstream in(file.path(), std::ios::binary);
