@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Configures (once) and builds gaia into build/ with Ninja; ccache and precompiled headers keep rebuilds short.
+# Configures (once) and builds gaia into build/ with Ninja; unity batches and ccache keep builds short.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR=${GAIA_BUILD_DIR:-build}
