@@ -197,7 +197,7 @@ TEST(Cli, ConvertToHalf) {
 // bad value or a file without gaia metadata is one error line and no output.
 TEST(Cli, ConvertSetsAStoredSamplingSetting) {
   test::TempDir d;
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   std::string yaml = c.to_yaml();
   const auto cut = yaml.find("  start_time:");  // as if saved before decoder.start_time existed
   ASSERT_NE(cut, std::string::npos);

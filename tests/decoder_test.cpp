@@ -785,7 +785,7 @@ TEST(DecoderSampler, StartTimeRefinesTheCoarseFrame) {
   auto o = sample_options(f.c.decoder, 3, 11);
   EXPECT_EQ(o.start_time, f.c.decoder.start_time);  // the config's
   EXPECT_LT(o.start_time, 1.0);                   // the CPU default refines the coarse frame ...
-  EXPECT_EQ(Config::load(test::source_dir() / "configs" / "paper.yaml").decoder.start_time, 1.0);  // ... the paper's does not
+  EXPECT_EQ(test::config("paper.yaml").decoder.start_time, 1.0);  // ... the paper's does not
   o.mix_probability = 0;
   o.noise_scale = 0.5;  // keeps the samples inside the clamp to [-1, 1]
   const auto base = f.w.cond_image.clamp(-1, 1);

@@ -48,7 +48,7 @@ TEST(ScalingFit, RefusesWhatNoFallingLawFits) {
 }
 
 TEST(Scaling, FamilyFollowsTheConfigsRule) {
-  Config c = Config::load(test::source_dir() / "configs" / "default.yaml");
+  Config c = test::config("default.yaml");
   const auto runs = world::scaling_family(c, 6, 144);
   ASSERT_EQ(runs.size(), 6u);
   const double per_step = double(c.world.batch_size) * c.world.context_steps * (c.world.text_tokens + 144 + 2);
@@ -79,7 +79,7 @@ TEST(Scaling, StudyPredictsTheLargestBeforeTrainingItAndResumes) {
   const fs::path root = dir / "tokens";
   write_header(root);
   for (int e = 0; e < 10; ++e) write_episode(root, EpisodeSpec{fmt::format("e{}", e), 24, "clear", 3 * e});
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   c.run.device = "cpu";
   c.world.scaling_width = 8;
   c.world.scaling_head_dim = 8;

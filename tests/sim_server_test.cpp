@@ -31,7 +31,7 @@ struct Served {
   std::thread thread;
   int port = 0;
   explicit Served(int max_sessions = 8) {
-    info.config = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+    info.config = test::config("tiny.yaml");
     info.grid_h = 2;
     info.grid_w = 3;
     info.K = 32;

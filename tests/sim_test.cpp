@@ -26,7 +26,7 @@ struct Fixture {
   world::WorldInfo info;
   world::WorldModel model{nullptr};
   Fixture() {
-    info.config = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+    info.config = test::config("tiny.yaml");
     info.config.world.guidance_scale = 3;
     info.config.world.top_k = 8;
     info.grid_h = 2;

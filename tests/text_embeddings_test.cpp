@@ -79,7 +79,7 @@ class FakeEncoder : public text::TextEncoder {
 };
 
 Config tiny_config() {
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   c.run.device = "cpu";
   return c;
 }

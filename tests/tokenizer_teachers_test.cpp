@@ -50,7 +50,7 @@ std::set<std::string> named(const Weights& w, const std::vector<std::string>& pr
 }
 
 Config teachers_config() {
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   c.tokenizer.disc_start = 1000000;  // the GAN term is not the subject here (the resume test turns it on)
   return c;
 }

@@ -29,7 +29,7 @@ using namespace gaia;
 namespace {
 
 Config checkpointing_config() {
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   c.run.checkpoint_every = 10;
   return c;
 }

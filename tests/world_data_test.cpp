@@ -397,7 +397,7 @@ TEST(WorldData, BalancingChangesTheDistributionAsTheBalancerSays) {
 TEST(WorldData, TrainingBatchesAreAFunctionOfSeedAndStep) {
   test::TempDir dir;
   TokenDataset ds(make_small(dir));
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");  // T = 4, m = 2, batch 4
+  Config c = test::config("tiny.yaml");  // T = 4, m = 2, batch 4
   auto split = ds.split();
   Vocab v = world::build_vocab(ds, ds.indices(split.train), c.world.text_vocab);
   WindowSampler s(ds, ds.windows({0, 1, 2}, c.world.context_steps, 1), c.data.balance_world, c.data.balance_exponent,
@@ -472,7 +472,7 @@ TEST(WorldData, TokenizeCopiesTheSourceSplit) {
   data::Dataset src(dir / "ds");
   data::Split split{{src.ids()[0], src.ids()[2]}, {src.ids()[1]}, {}};
   write_file_atomic(dir / "ds" / "split.json", split.to_json().dump());
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   torch::manual_seed(0);
   tokenizer::ImageTokenizer t(c);  // untrained weights tokenize as well as any for this purpose
   tokenizer::save_tokenizer(t, c, dir / "tok.safetensors");
@@ -505,7 +505,7 @@ TEST(WorldEval, SteeringSensitivityBucketsFramesByTheTurnBeforeThem) {
   e.action = [](int64_t t) { return std::make_pair(5.0f, t == 6 ? kNaN : t % 3 == 0 ? 0.01f : t % 3 == 1 ? -0.01f : 0.001f); };
   write_episode(root, e);
   TokenDataset ds(root);
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");  // T = 4
+  Config c = test::config("tiny.yaml");  // T = 4
   auto windows = ds.windows({0}, c.world.context_steps, c.world.context_steps);  // steps 0-3, 4-7, 8-11
   ASSERT_EQ(windows.size(), 3u);
   torch::manual_seed(5);

@@ -242,7 +242,7 @@ TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
 
 TEST(WorldModel, ParameterCountEqualsThePlan) {
   for (auto name : {"tiny.yaml", "default.yaml"}) {
-    Config c = Config::load(test::source_dir() / "configs" / name);
+    Config c = test::config(name);
     WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
     EXPECT_EQ(m->parameter_count(/*with_word_embedding=*/false), sizing::world_params(c).total) << name;
   }

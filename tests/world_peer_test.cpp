@@ -21,7 +21,7 @@ fs::path peer_dir() { return test::source_dir() / "tests" / "fixtures" / "world_
 }  // namespace
 
 TEST(WorldPeer, LogitsAndLossMatchThePyTorchPeer) {
-  Config c = Config::load(test::source_dir() / "configs" / "tiny.yaml");
+  Config c = test::config("tiny.yaml");
   SafetensorsFile io(peer_dir() / "world_peer_io.safetensors");
   auto get = [&](const std::string& name) { return tensor_from_view(io.get(name)); };
   const auto want_logits = get("logits");  // [B, T, n, K]

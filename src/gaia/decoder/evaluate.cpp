@@ -59,7 +59,7 @@ nlohmann::json evaluate_decoder(const Config& cfg, VideoUNet& model, tokenizer::
   data::Dataset ds(dataset);
   std::vector<size_t> eps;
   for (size_t e : data::episode_indices(ds, data::held_out_ids(ds, cfg.run.seed)))
-    if (o.footage == world::Footage::kAny || world::footage_matches(ds.meta(e).is_procedural(), o.footage))
+    if (world::footage_matches(ds.meta(e).is_procedural(), o.footage))
       eps.push_back(e);
   const int N = o.token_frames, M = 4 * N - 3;  // 25 Hz frames spanned by N frames at 6.25 Hz
   std::vector<std::unique_ptr<data::Episode>> episodes;

@@ -20,7 +20,7 @@ bool footage_matches(bool procedural, Footage f) {
 }
 
 bool footage_matches(const TokenDataset& ds, size_t e, Footage f) {
-  return f == Footage::kAny || footage_matches(ds.meta(e).is_procedural(), f);
+  return footage_matches(ds.meta(e).is_procedural(), f);
 }
 
 std::vector<size_t> with_footage(const TokenDataset& ds, const std::vector<size_t>& episodes, Footage f) {
