@@ -43,7 +43,9 @@ void set_torch_threads(int n) {
 
 void configure_allocator() {
   mallopt(M_MMAP_MAX, 0);                 // every block from the heap (brk), reusable after free
-  mallopt(M_TRIM_THRESHOLD, 1 << 30);     // return heap memory to the OS only above 1 GiB of free top
+  // Never shrink the heap: a training step's peak (its attention scores) is freed at the end of every step, and
+  // any threshold below it returned those pages only for the next step to fault and clear them again.
+  mallopt(M_TRIM_THRESHOLD, -1);
 }
 
 torch::Dtype to_torch(DType t) {

@@ -18,9 +18,9 @@ DType from_torch(torch::Dtype t);
 // Sets LibTorch's intra-op threads (0 = all cores); some builds otherwise default to one thread.
 void set_torch_threads(int n);
 
-// Keeps large freed blocks in the process instead of returning them to the OS: glibc serves allocations above
-// 32 MB with fresh mmap()s, so every training step would pay page faults and page clearing for its attention
-// scores. Called once by the app and the benches.
+// Keeps freed blocks in the process instead of returning them to the OS: glibc serves allocations above 32 MB with
+// fresh mmap()s and trims the heap's free top, so every training step would pay page faults and page clearing for
+// its attention scores. A process's resident memory stays at its peak. Called once by the app and the benches.
 void configure_allocator();
 
 // Copies a tensor out of a (mapped) safetensors view.
