@@ -42,6 +42,10 @@ struct Fixture {
 
 TEST(SimSession, SteppedWithFixedActionsItGivesTheRolloutsTokens) {
   Fixture f;
+  {  // sharpened: a random model's actions barely move its distributions, and the two counter-commands must differ
+    torch::NoGradGuard ng;
+    for (auto& q : f.model->parameters()) q.mul_(3.0);
+  }
   const int64_t T = f.model->layout.T, P = 2, F = T + 3;  // past the window: the history is re-encoded
   torch::manual_seed(3);
   auto prompt = torch::randint(0, kSimK, {P, kSimN}, torch::kLong);

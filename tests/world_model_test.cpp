@@ -15,6 +15,7 @@
 #include "gaia/world/rollout.h"
 #include "gaia/world/sampling.h"
 #include "gaia/world/token_step.h"
+#include "gaia/world/transformer.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -172,6 +173,22 @@ TEST(WorldModel, PrefillFillsTheCacheAsTheBodyDoes) {
 
 // Sampling's fused per-token path against the general one (body, then logits), token by token on caches holding the
 // same prefix: the same logits and the same cache contents, for one row and for guidance's two.
+// The cached attention's own softmax (a vectorised exp, transformer.h) against LibTorch's, on row lengths around its
+// eight-float blocks and on scores far apart (underflowing weights).
+TEST(WorldModel, CachedAttentionSoftmaxMatchesLibTorchs) {
+  torch::manual_seed(2);
+  for (const int64_t n : {1, 7, 8, 9, 31, 1134}) {
+    auto x = torch::randn({3, n}) * 6;
+    if (n > 8) x[1][5] = -200.0f, x[2][0] = 60.0f;
+    auto ours = x.clone();
+    softmax_rows(ours.data_ptr<float>(), 3, n);
+    auto want = torch::softmax(x.to(torch::kDouble), -1).to(torch::kFloat);
+    EXPECT_LT((ours - want).abs().max().item<double>(), 1e-6) << n;
+    EXPECT_LT(((ours - want).abs() / want.clamp_min(1e-30)).masked_select(want > 1e-30).max().item<double>(), 1e-5) << n;
+    EXPECT_TRUE(torch::allclose(ours.sum(-1).to(torch::kDouble), torch::ones({3}, torch::kDouble), 0, 1e-6)) << n;
+  }
+}
+
 TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
   Config c = test::config("tiny.yaml");
   auto m = small_model(c, 5);
@@ -479,6 +496,46 @@ TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
   run(true, int(T + 2));
   at::set_num_threads(threads);
   EXPECT_GT(std::get<0>(at::_unique(ahead.narrow(1, P, F))).numel(), 4);  // it samples, it does not repeat one code
+}
+
+// The raw per-token choice (token_choice.h, with the fused step) and the LibTorch one (copy bias, guide, keep_top_k,
+// sample_tokens, with the general path) choose the same tokens: argmax, top-k, guided within the conditional top k,
+// text-guided over all codes, and the copy bias on the previous frame's code.
+TEST(WorldRollout, RawTokenChoiceGivesTheLibTorchPathsTokens) {
+  Config c = test::config("tiny.yaml");
+  const int64_t n = 12, K = 64;
+  torch::manual_seed(5);
+  WorldModel m(c.world, n, K);
+  m->eval();
+  sharpen(m, 2.0);
+  const int64_t T = c.world.context_steps, P = 2, F = T + 2;
+  RolloutPrompt p;
+  torch::manual_seed(9);
+  p.tokens = torch::randint(0, K, {P, n}, torch::kLong);
+  p.actions = torch::randn({P + F, 2});
+  const int threads = at::get_num_threads();
+  at::set_num_threads(1);
+  for (const int setting : {0, 1, 2, 3, 4}) {
+    SCOPED_TRACE("setting " + std::to_string(setting));
+    RolloutOptions o;
+    o.frames = int(F);
+    o.seed = 4;
+    o.sampling.top_k = 10;
+    o.sampling.temperature = 0.8;
+    RolloutPrompt q = p;
+    if (setting == 0) o.sampling.strategy = Strategy::Argmax;
+    if (setting >= 2) o.guidance.scale = 3;  // 2: actions, within the conditional top k
+    if (setting == 3) q.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
+    if (setting == 4) m->cfg.copy_bias = 1.5;
+    o.fused_tokens = false;
+    auto general = rollout(m, q, o).tokens;
+    o.fused_tokens = true;
+    auto raw = rollout(m, q, o).tokens;
+    m->cfg.copy_bias = 0;
+    EXPECT_TRUE(torch::equal(general, raw));
+    if (setting > 0) EXPECT_GT(std::get<0>(at::_unique(raw.narrow(1, P, F))).numel(), 8);  // it does sample
+  }
+  at::set_num_threads(threads);
 }
 
 TEST(WorldRollout, GuidanceUsesOneBatchAndNegativePromptReplacesUnconditional) {

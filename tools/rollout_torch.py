@@ -9,7 +9,8 @@ The loop, as the C++ one:
   - a generated frame: its text tokens, then n image tokens one at a time, each predicted from the previous
     position's output (head after ln_f), with the copy bias (model.cpp with_copy_bias) on the previous frame's
     token at that slot, chosen by argmax or top-k (softmax of the k highest / temperature, one torch.multinomial
-    draw from a generator seeded as gaia's, rank -> token), then its action tokens;
+    draw, rank -> token: gaia draws from the same distribution with one uniform number, so the sampled tokens
+    differ while the work compares), then its action tokens;
   - when the context is full (T steps) the window slides by one (§2.3): the cache is emptied and the last T - 1
     steps re-enter it at temporal positions 0 .. T - 2.
 No guidance (the shipped model's default) and no text prompt: actions only, as `gaia generate --steer`.

@@ -6,6 +6,7 @@
 
 #include "gaia/core/error.h"
 #include "gaia/world/batch.h"
+#include "gaia/world/token_choice.h"
 
 namespace gaia::world {
 
@@ -218,7 +219,27 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
   auto h = model_->body(model_->embed_text(sb, win_).view({B, L.m, d}), &cache_);
   auto next = model_->logits(h.select(1, h.size(1) - 1));  // [B, K] predicting z_0
   const bool fast = fast_ && TokenStep::applies(*model_, B);
+  // With the fused step, each token is chosen on raw memory too (token_choice.h): the same tokens up to rounding.
+  const bool raw = fast && TokenChoice::applies(o_.sampling);
+  const TokenChoice choose{o_.sampling, model_->cfg.copy_bias, guided_, within};
+  int64_t* all = raw ? tokens_.data_ptr<int64_t>() : nullptr;  // [B, capacity, n], contiguous (CPU)
+  const int64_t cap = tokens_.size(1);
+  auto raw_tok = torch::empty({B}, torch::kLong);
+  int64_t prev[TokenStep::kMaxRows];
+  const bool biased = k > 0 && model_->cfg.copy_bias != 0;  // as in WorldModelImpl::forward
   for (int64_t i = 0; i < n; ++i) {
+    if (raw) {
+      int64_t* t = raw_tok.data_ptr<int64_t>();
+      auto lg = next.to(torch::kFloat).contiguous();  // [B, K]
+      for (int64_t b = 0; biased && b < B; ++b) prev[b] = all[(b * cap + k - 1) * n + i];
+      const double s = guided_ ? o_.guidance.at(int(generated_), int(i), int(n)) : 0.0;
+      choose(lg.data_ptr<float>(), N_, model_->K, biased ? prev : nullptr, s, gen_, t);
+      for (int64_t b = N_; b < B; ++b) t[b] = t[b - N_];  // both halves continue from the same chosen token
+      for (int64_t b = 0; b < B; ++b) all[(b * cap + k) * n + i] = t[b];
+      if (progress && ((i + 1) % Lookahead::kChunk == 0 || i + 1 == n)) progress->release(i + 1);
+      next = fast_->logits(raw_tok, win_, i, cache_);
+      continue;
+    }
     auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
     if (k > 0 && model_->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
       lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);

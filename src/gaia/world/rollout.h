@@ -48,8 +48,8 @@ struct RolloutOptions {
   // window's history on a second thread while a frame samples (RolloutStepper::Lookahead). The tokens are those of
   // the plain path up to float rounding.
   bool lookahead = true;
-  // Sampling's per-token path on raw memory (token_step.h) where it applies; false: the general LibTorch path (the
-  // reference of tests and benchmarks).
+  // Sampling's per-token path on raw memory (token_step.h, and the choice of each token: token_choice.h) where it
+  // applies; false: the general LibTorch path (the reference of tests and benchmarks).
   bool fused_tokens = true;
   // The products' precision (--precision): bf16 runs every step, and the lookahead's re-encoding, under autocast;
   // the fused token step, the cached attention, sampling and the cache stay float32.

@@ -26,6 +26,12 @@ struct SamplingOptions {
 // logits [B, K] -> token ids [B] (int64). Random draws come from `gen` only, so rollouts are reproducible.
 torch::Tensor sample_tokens(const torch::Tensor& logits, const SamplingOptions& o, torch::Generator& gen);
 
+// One token drawn from n candidates (ids ascending, weights proportional to their probabilities): the inverse of
+// the cumulative weights at one uniform number from `gen`. Top-k sampling draws with this on every path (the
+// LibTorch one above, the rollout's raw one in token_choice.h), so that paths finding the same candidates and
+// weights draw the same token from the same stream.
+int64_t draw_token(const int64_t* ids, const float* weights, int64_t n, torch::Generator& gen);
+
 // logits [B, K] with every entry outside the k highest of `ranking` [B, K] set to -inf (exactly k by rank: a
 // threshold on the k-th value would let ties through). Top-k filtering is keep_top_k(l, l, k); guided logits kept
 // to the conditional model's candidates are keep_top_k(guided, cond, k).

@@ -15,7 +15,7 @@ namespace gaia::world {
 
 namespace {
 
-constexpr int64_t kMaxRows = 4;  // beyond this a row-by-row product loses to LibTorch's matrix product
+constexpr int64_t kMaxRows = TokenStep::kMaxRows;
 
 torch::Tensor copied(const torch::Tensor& t) { return t.detach().contiguous().clone(); }
 
@@ -142,10 +142,12 @@ torch::Tensor TokenStep::logits(const torch::Tensor& tokens, int64_t t, int64_t 
          layers_.size(), B);
   auto ids = tokens.to(torch::kCPU).to(torch::kLong).contiguous();
   const int64_t* id = ids.data_ptr<int64_t>();
-  auto opts = torch::TensorOptions().dtype(torch::kFloat);
-  auto x = torch::empty({B, d}, opts), h = torch::empty({B, d}, opts), qkv = torch::empty({B, 3 * d}, opts),
-       u = torch::empty({B, 4 * d}, opts), y = torch::empty({B, d}, opts);
-  float *xp = x.data_ptr<float>(), *hp = h.data_ptr<float>(), *up = u.data_ptr<float>(), *yp = y.data_ptr<float>();
+  const int64_t H = heads_, cap = cache.capacity();
+  // The step's activations in buffers of its thread, reused token after token (no allocation a token).
+  thread_local std::vector<float> scratch;
+  scratch.resize(size_t(B * (d + d + 3 * d + 4 * d + d + d + H * cap)));
+  float *xp = scratch.data(), *hp = xp + B * d, *qkv = hp + B * d, *up = qkv + B * 3 * d, *yp = up + B * 4 * d,
+        *att = yp + B * d, *scores = att + B * d;
   const float *emb = f32(embedding_), *tp = f32(temporal_) + t * d, *sp = f32(spatial_) + (image_slot0_ + slot) * d;
   for (int64_t b = 0; b < B; ++b) {
     if (id[b] < 0 || id[b] >= K_) fail("token step: token {} outside [0, K = {})", id[b], K_);
@@ -155,9 +157,10 @@ torch::Tensor TokenStep::logits(const torch::Tensor& tokens, int64_t t, int64_t 
   for (size_t li = 0; li < layers_.size(); ++li) {
     const Layer& l = layers_[li];
     layer_norm_rows(xp, B, d, f32(l.ln1_w), f32(l.ln1_b), l.eps1, hp);
-    linear_rows(hp, B, f32(l.qkv_p), f32(l.qkv_b), d, 3 * d, qkv.data_ptr<float>());
-    auto att = attend_one_cached(qkv, cache.k[li], cache.v[li], cache.length, heads_);  // [B, d]
-    linear_rows(att.data_ptr<float>(), B, f32(l.proj_p), f32(l.proj_b), d, d, yp);
+    linear_rows(hp, B, f32(l.qkv_p), f32(l.qkv_b), d, 3 * d, qkv);
+    attend_one_cached(qkv, B, d, H, cache.k[li].data_ptr<float>(), cache.v[li].data_ptr<float>(), cap, cache.length,
+                      scores, att);  // [B, d]
+    linear_rows(att, B, f32(l.proj_p), f32(l.proj_b), d, d, yp);
     for (int64_t i = 0; i < B * d; ++i) xp[i] += yp[i];
     layer_norm_rows(xp, B, d, f32(l.ln2_w), f32(l.ln2_b), l.eps2, hp);
     linear_rows(hp, B, f32(l.fc_p), f32(l.fc_b), d, 4 * d, up);
@@ -167,7 +170,7 @@ torch::Tensor TokenStep::logits(const torch::Tensor& tokens, int64_t t, int64_t 
   }
   cache.length += 1;
   layer_norm_rows(xp, B, d, f32(lnf_w_), f32(lnf_b_), eps_f_, hp);
-  auto out = torch::empty({B, K_}, opts);
+  auto out = torch::empty({B, K_}, torch::TensorOptions().dtype(torch::kFloat));
   linear_rows(hp, B, f32(head_p_), nullptr, d, K_, out.data_ptr<float>());
   return out;
 }

@@ -14,6 +14,7 @@ namespace gaia::world {
 
 class TokenStep {
  public:
+  static constexpr int64_t kMaxRows = 4;  // beyond this a row-by-row product loses to LibTorch's matrix product
   // CPU, float32 weights, and few rows (many rows make real matrix products, which LibTorch does well). Under bf16's
   // autocast (--precision bf16) too: the step itself stays float32, as the cached attention does in the general
   // path (its matrices stored as bf16 gained nothing: docs/benchmarks.md).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -99,22 +100,63 @@ GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, i
   }
 }
 
+// exp(x) of eight floats for x <= 0 (shifted scores), as Cephes' expf: x = n ln2 + r, exp(r) by a polynomial, 2^n
+// from the exponent bits; below -87.3 it gives 2^-126 (a weight of no account next to the row's maximum, 1).
+using Floats8 = float __attribute__((vector_size(32)));
+using Ints8 = int32_t __attribute__((vector_size(32)));
+[[gnu::always_inline]] inline Floats8 exp8(Floats8 x) {
+  const Floats8 lo = Floats8{} - 87.33654f;
+  x = x < lo ? lo : x;
+  const Floats8 t = x * 1.44269504088896341f + 12582912.0f;  // + 1.5 * 2^23: n = round(x / ln2) in the low bits
+  const Floats8 n = t - 12582912.0f;
+  const Ints8 ni = reinterpret_cast<const Ints8&>(t) - 0x4B400000;
+  const Floats8 r = (x - n * 0.693359375f) - n * -2.12194440e-4f;
+  Floats8 p = r * 1.9875691500e-4f + 1.3981999507e-3f;
+  p = p * r + 8.3334519073e-3f;
+  p = p * r + 4.1665795894e-2f;
+  p = p * r + 1.6666665459e-1f;
+  p = p * r + 5.0000001201e-1f;
+  const Floats8 y = p * r * r + r + 1.0f;
+  const Ints8 e = (ni + 127) << 23;
+  return y * reinterpret_cast<const Floats8&>(e);
+}
+
 }  // namespace
+
+GAIA_SIMD_CLONES void softmax_rows(float* s, int64_t rows, int64_t n) {
+  for (int64_t row = 0; row < rows; ++row) {
+    float* x = s + row * n;
+    float top = -std::numeric_limits<float>::infinity();
+    for (int64_t j = 0; j < n; ++j) top = std::max(top, x[j]);
+    Floats8 sum8{};
+    int64_t j = 0;
+    for (; j + 8 <= n; j += 8) {
+      Floats8 v;
+      std::memcpy(&v, x + j, sizeof v);
+      v = exp8(v - top);
+      std::memcpy(x + j, &v, sizeof v);
+      sum8 += v;
+    }
+    float sum = 0;
+    for (int e = 0; e < 8; ++e) sum += sum8[e];
+    if (j < n) {  // the last few through the same polynomial
+      Floats8 v{};
+      for (int64_t e = j; e < n; ++e) v[e - j] = x[e] - top;
+      v = exp8(v);
+      for (int64_t e = j; e < n; ++e) x[e] = v[e - j], sum += v[e - j];
+    }
+    const float inv = 1.0f / sum;
+    for (int64_t e = 0; e < n; ++e) x[e] *= inv;
+  }
+}
 
 // Sampling's case: one new token per row appended to a float32 CPU cache. The general path spends ~20 small
 // LibTorch operations per layer on views, cache writes and two batched products of a single query; here the cache
-// write and the scores are one pass over raw memory, then one softmax and one weighted sum (docs/benchmarks.md).
-// qkv [B, 3d] (per row: q | k | v, each H x hd) -> [B, d]; the cache grows by one at `offset`.
-torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
-                                int64_t heads) {
-  const int64_t B = qkv.size(0), d = qkv.size(1) / 3, hd = d / heads, cap = K.size(3), Lk = offset + 1;
+// write and the scores are one pass over raw memory, then the softmax and one weighted sum (docs/benchmarks.md).
+void attend_one_cached(const float* in, int64_t B, int64_t d, int64_t heads, float* kc, float* vc, int64_t cap,
+                       int64_t offset, float* sc, float* y) {
+  const int64_t hd = d / heads, Lk = offset + 1;
   const float scale = float(1.0 / std::sqrt(double(hd)));
-  auto src = qkv.contiguous();
-  auto out = torch::empty({B, d}, qkv.options());
-  const float* in = src.data_ptr<float>();
-  float *kc = K.data_ptr<float>(), *vc = V.data_ptr<float>(), *y = out.data_ptr<float>();
-  auto scores = torch::empty({B * heads, Lk}, qkv.options());  // [B * H, Lk]
-  float* sc = scores.data_ptr<float>();
   // Pass 1: append this token's key and value, score the query against every cached key.
   at::parallel_for(0, B * heads, 1, [&](int64_t begin, int64_t end) {
     for (int64_t bh = begin; bh < end; ++bh) {
@@ -124,17 +166,27 @@ torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torc
       for (int64_t e = 0; e < hd; ++e) kb[e * cap + offset] = q[d + e];
       std::copy(q + 2 * d, q + 2 * d + hd, vc + (bh * cap + offset) * hd);
       score_keys(q, kb, cap, Lk, hd, scale, sc + bh * Lk);
+      softmax_rows(sc + bh * Lk, 1, Lk);
     }
   });
-  const auto probs = scores.softmax(-1);  // one vectorised pass over all rows
-  const float* pr = probs.data_ptr<float>();
   // Pass 2: y = sum_j p_j v_j, written straight into the head's slice of the output row.
   at::parallel_for(0, B * heads, 1, [&](int64_t begin, int64_t end) {
     for (int64_t bh = begin; bh < end; ++bh) {
       const int64_t b = bh / heads, h = bh % heads;
-      weighted_sum(pr + bh * Lk, vc + (bh * cap) * hd, Lk, hd, y + b * d + h * hd);
+      weighted_sum(sc + bh * Lk, vc + (bh * cap) * hd, Lk, hd, y + b * d + h * hd);
     }
   });
+}
+
+// qkv [B, 3d] (per row: q | k | v, each H x hd) -> [B, d]; the cache grows by one at `offset`.
+torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
+                                int64_t heads) {
+  const int64_t B = qkv.size(0), d = qkv.size(1) / 3;
+  auto src = qkv.contiguous();
+  auto out = torch::empty({B, d}, qkv.options());
+  auto scores = torch::empty({B * heads, offset + 1}, qkv.options());
+  attend_one_cached(src.data_ptr<float>(), B, d, heads, K.data_ptr<float>(), V.data_ptr<float>(), K.size(3), offset,
+                    scores.data_ptr<float>(), out.data_ptr<float>());
   return out;
 }
 

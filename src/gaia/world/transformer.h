@@ -27,6 +27,14 @@ struct KVCache {
 // contiguous) -> [B, d], the token attending to the cache's first offset + 1 positions.
 torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
                                 int64_t heads);
+// The same on raw memory (the fused token step's): qkv [B, 3d], K [B, H, hd, cap], V [B, H, cap, hd], `scores` room
+// for B * H * (offset + 1) floats, y [B, d].
+void attend_one_cached(const float* qkv, int64_t B, int64_t d, int64_t heads, float* K, float* V, int64_t cap,
+                       int64_t offset, float* scores, float* y);
+
+// Softmax of each of `rows` rows of n floats, in place (the cached attention's): exp as a vectorised polynomial,
+// within a few units in the last place of std::exp.
+void softmax_rows(float* s, int64_t rows, int64_t n);
 
 struct CausalSelfAttentionImpl : torch::nn::Module {
   CausalSelfAttentionImpl(int64_t d, int64_t heads);
