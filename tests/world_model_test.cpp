@@ -10,6 +10,7 @@
 #include "gaia/train/checkpoint.h"
 #include "gaia/world/calibrate.h"
 #include "gaia/world/distill.h"
+#include "gaia/torch/precision.h"
 #include "gaia/world/guidance.h"
 #include "gaia/world/model.h"
 #include "gaia/world/rollout.h"
@@ -187,6 +188,27 @@ TEST(WorldModel, CachedAttentionSoftmaxMatchesLibTorchs) {
     EXPECT_LT(((ours - want).abs() / want.clamp_min(1e-30)).masked_select(want > 1e-30).max().item<double>(), 1e-5) << n;
     EXPECT_TRUE(torch::allclose(ours.sum(-1).to(torch::kDouble), torch::ones({3}, torch::kDouble), 0, 1e-6)) << n;
   }
+}
+
+// A bf16 cache (RolloutStepper under bf16 on the CPU) is read widened to float32: the cached attention over it gives
+// what it gives over a float32 cache holding the same values (up to the order of float sums), and the new token's key and value are stored rounded
+// to nearest even, as LibTorch rounds to bf16.
+TEST(WorldModel, CachedAttentionOverABf16CacheIsTheFloatOneOverItsValues) {
+  torch::manual_seed(4);
+  const int64_t B = 2, H = 3, hd = 8, d = H * hd, cap = 40, offset = 29;
+  auto K16 = torch::randn({B, H, hd, cap}).to(torch::kBFloat16), V16 = torch::randn({B, H, cap, hd}).to(torch::kBFloat16);
+  auto K32 = K16.to(torch::kFloat), V32 = V16.to(torch::kFloat);
+  auto qkv = torch::randn({B, 3 * d});
+  auto k_new = qkv.narrow(1, d, d).to(torch::kBFloat16).to(torch::kFloat);
+  auto v_new = qkv.narrow(1, 2 * d, d).to(torch::kBFloat16).to(torch::kFloat);
+  auto y16 = attend_one_cached(qkv, K16, V16, offset, H);
+  EXPECT_TRUE(torch::equal(K16.select(3, offset).reshape({B, d}).to(torch::kFloat), k_new));  // stored rounded
+  EXPECT_TRUE(torch::equal(V16.select(2, offset).reshape({B, d}).to(torch::kFloat), v_new));
+  auto rounded = qkv.clone();
+  rounded.narrow(1, d, 2 * d).copy_(torch::cat({k_new, v_new}, 1));
+  auto y32 = attend_one_cached(rounded, K32, V32, offset, H);
+  EXPECT_TRUE(torch::allclose(y16, y32, 1e-6, 1e-6)) << (y16 - y32).abs().max().item<double>();  // sums' order aside
+  EXPECT_GT(y16.abs().sum().item<double>(), 0);
 }
 
 TEST(WorldModel, TokenStepMatchesTheGeneralPath) {
@@ -475,10 +497,12 @@ TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
   p.actions = torch::randn({P + F, 2});
   const int threads = at::get_num_threads();
   at::set_num_threads(1);
+  Precision precision = Precision::kFp32;
   auto run = [&](bool lookahead, int fork_at) {
     RolloutOptions o;
     o.seed = 4;
     o.lookahead = lookahead;
+    o.precision = precision;
     RolloutStepper s(m, o, 1);
     std::optional<RolloutStepper> copy;
     for (int64_t k = 0; k < P; ++k) s.step(p, p.tokens[k]);
@@ -494,6 +518,13 @@ TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
   auto plain = run(false, -1), ahead = run(true, -1);
   EXPECT_TRUE(torch::equal(plain, ahead));
   run(true, int(T + 2));
+  {  // and at bf16, whose cache is bf16 (RolloutStepper::new_cache)
+    SCOPED_TRACE("bf16");
+    precision = Precision::kBf16;
+    EXPECT_TRUE(torch::equal(run(false, -1), run(true, -1)));
+    run(true, int(T + 2));
+    precision = Precision::kFp32;
+  }
   at::set_num_threads(threads);
   EXPECT_GT(std::get<0>(at::_unique(ahead.narrow(1, P, F))).numel(), 4);  // it samples, it does not repeat one code
 }

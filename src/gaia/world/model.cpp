@@ -162,10 +162,11 @@ torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& p
   return logits.scatter_add(-1, idx, torch::full(idx.sizes(), bias, logits.options()));
 }
 
-KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity) const {
+KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity, c10::optional<torch::ScalarType> dtype) const {
   KVCache c;
   const int64_t H = cfg.n_heads, hd = d / H;
   auto opts = token_embedding->weight.options().requires_grad(false);
+  if (dtype) opts = opts.dtype(*dtype);
   for (int i = 0; i < cfg.n_layers; ++i) {
     c.k.push_back(torch::empty({batch, H, hd, capacity}, opts));  // keys transposed (transformer.h)
     c.v.push_back(torch::empty({batch, H, capacity, hd}, opts));

@@ -40,7 +40,8 @@ struct WorldModelImpl : torch::nn::Module {
   // sliding window): their keys and values are appended to the cache, and the last block stops there.
   void prefill(const torch::Tensor& x, KVCache& cache);
   torch::Tensor logits(const torch::Tensor& h) { return head->forward(h); }  // [..., d] -> [..., K]
-  KVCache make_cache(int64_t batch, int64_t capacity) const;
+  // dtype: the weights' by default; bf16 halves what sampling reads per token (RolloutStepper under bf16 on the CPU).
+  KVCache make_cache(int64_t batch, int64_t capacity, c10::optional<torch::ScalarType> dtype = c10::nullopt) const;
 
   int64_t parameter_count(bool with_word_embedding = true) const;
 

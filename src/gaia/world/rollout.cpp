@@ -117,9 +117,17 @@ RolloutStepper::RolloutStepper(WorldModel& model, const RolloutOptions& o, int64
   if (o.window_stride < 1 || o.window_stride >= model->layout.T)
     fail("window stride must be in [1, T - 1 = {}] (got {})", model->layout.T - 1, o.window_stride);
   const int64_t B = guided_ ? 2 * N_ : N_;
-  cache_ = model->make_cache(B, model->layout.length());
+  cache_ = new_cache(B);
   if (o.fused_tokens && TokenStep::applies(*model, B)) fast_ = std::make_shared<const TokenStep>(*model);
   tokens_ = torch::zeros({B, 8, model->layout.n}, torch::TensorOptions().dtype(torch::kLong).device(dev_));
+}
+
+KVCache RolloutStepper::new_cache(int64_t rows) const {
+  // Under bf16 on the CPU the keys and values are kept as bf16: the history's come out of bf16 products anyway, and
+  // sampling reads the whole cache for every token, so half the bytes is what its attention waits on.
+  const bool bf16 = o_.precision == Precision::kBf16 && dev_.is_cpu();
+  return model_->make_cache(rows, model_->layout.length(),
+                            bf16 ? c10::optional<torch::ScalarType>(torch::kBFloat16) : c10::nullopt);
 }
 
 torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& given) {
@@ -171,7 +179,7 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
     // The next step slides: encode its history on a second thread now, steps k - T + 2 .. k - 1 at once, then this
     // step's tokens in fixed chunks as they are sampled (fixed, so that the numbers never depend on timing).
     const int64_t first = k - (L.T - 2), t = L.T - 2;
-    if (ahead_.cache.k.empty()) ahead_.cache = model_->make_cache(B, L.length());
+    if (ahead_.cache.k.empty()) ahead_.cache = new_cache(B);
     // The job's own copies: the caller may change its prompt's tensors once this step returns.
     auto own = [](WorldBatch b) {
       for (auto* f : {&b.tokens, &b.actions, &b.text_ids, &b.text_emb, &b.use_action, &b.use_text})

@@ -52,7 +52,7 @@ struct RolloutOptions {
   // applies; false: the general LibTorch path (the reference of tests and benchmarks).
   bool fused_tokens = true;
   // The products' precision (--precision): bf16 runs every step, and the lookahead's re-encoding, under autocast;
-  // the fused token step, the cached attention, sampling and the cache stay float32.
+  // the fused token step, the cached attention and sampling stay float32; on the CPU the cache is kept as bf16.
   Precision precision = Precision::kFp32;
 };
 
@@ -96,6 +96,7 @@ class RolloutStepper {
   at::Generator gen_;
   KVCache cache_;
   std::shared_ptr<const TokenStep> fast_;
+  KVCache new_cache(int64_t rows) const;  // the cache's dtype follows the precision (rollout.cpp)
   RolloutStepper rows(const std::vector<int64_t>& futures) const;  // repeat() and select(): these futures' rows  // sampling's per-token path where it applies (shared by forks)
   // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
   // ahead and the newest comes token by token: where the fused token step runs at one intra-op thread, a second

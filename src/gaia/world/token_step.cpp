@@ -137,8 +137,8 @@ torch::Tensor TokenStep::logits(const torch::Tensor& tokens, int64_t t, int64_t 
   torch::NoGradGuard ng;
   const int64_t B = tokens.numel(), d = d_;
   if (cache.k.size() != layers_.size() || cache.k[0].size(0) != B || cache.length >= cache.capacity() ||
-      cache.k[0].scalar_type() != torch::kFloat || !cache.k[0].is_contiguous() || !cache.v[0].is_contiguous())
-    fail("token step: the cache must hold {} layers of {} float32 rows with room for one more position",
+      !fused_cache(cache.k[0], cache.v[0]))
+    fail("token step: the cache must hold {} layers of {} float32 or bf16 rows with room for one more position",
          layers_.size(), B);
   auto ids = tokens.to(torch::kCPU).to(torch::kLong).contiguous();
   const int64_t* id = ids.data_ptr<int64_t>();
@@ -158,8 +158,7 @@ torch::Tensor TokenStep::logits(const torch::Tensor& tokens, int64_t t, int64_t 
     const Layer& l = layers_[li];
     layer_norm_rows(xp, B, d, f32(l.ln1_w), f32(l.ln1_b), l.eps1, hp);
     linear_rows(hp, B, f32(l.qkv_p), f32(l.qkv_b), d, 3 * d, qkv);
-    attend_one_cached(qkv, B, d, H, cache.k[li].data_ptr<float>(), cache.v[li].data_ptr<float>(), cap, cache.length,
-                      scores, att);  // [B, d]
+    attend_one_cached(qkv, B, d, H, cache.k[li], cache.v[li], cache.length, scores, att);  // [B, d]
     linear_rows(att, B, f32(l.proj_p), f32(l.proj_b), d, d, yp);
     for (int64_t i = 0; i < B * d; ++i) xp[i] += yp[i];
     layer_norm_rows(xp, B, d, f32(l.ln2_w), f32(l.ln2_b), l.eps2, hp);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <vector>
@@ -10,6 +11,7 @@
 
 #include <torch/version.h>
 
+#include "gaia/core/error.h"
 #include "gaia/torch/attention.h"
 #include "gaia/torch/simd.h"
 
@@ -51,31 +53,50 @@ torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& kT, const torc
   return attention(q, k, v, causal_mask(Lq, Lk, offset, q.options()));
 }
 
-// The two inner loops of one query's attention (torch/simd.h: also compiled for AVX2).
+// The two inner loops of one query's attention (torch/simd.h: also compiled for AVX2), over a float32 cache or a
+// bf16 one (torch's kBFloat16: a float's upper 16 bits, widened by a shift as they are read).
+[[gnu::always_inline]] inline float widen(float x) { return x; }
+[[gnu::always_inline]] inline float widen(uint16_t x) {
+  const uint32_t u = uint32_t(x) << 16;
+  float f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
+}
 
 // out[j] = scale * q . k_j for j < Lk, keys transposed (KT row e holds component e of every key, row stride `cap`):
 // four components at a time, each a contiguous row streamed over every key into `out` (a few KB, held in L1), so
 // memory is read as four sequential streams, not hd strided ones. Each key still sums its components in order.
-GAIA_SIMD_CLONES void score_keys(const float* q, const float* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
-                                 float* __restrict out) {
+template <class T>
+[[gnu::always_inline]] inline void score_keys_of(const float* q, const T* KT, int64_t cap, int64_t Lk, int64_t hd,
+                                                 float scale, float* __restrict out) {
   std::fill(out, out + Lk, 0.0f);
   int64_t e = 0;
   for (; e + 4 <= hd; e += 4) {
     const float q0 = q[e] * scale, q1 = q[e + 1] * scale, q2 = q[e + 2] * scale, q3 = q[e + 3] * scale;
-    const float* __restrict r0 = KT + e * cap;
-    const float *__restrict r1 = r0 + cap, *__restrict r2 = r1 + cap, *__restrict r3 = r2 + cap;
-    for (int64_t j = 0; j < Lk; ++j) out[j] = (((out[j] + q0 * r0[j]) + q1 * r1[j]) + q2 * r2[j]) + q3 * r3[j];
+    const T* __restrict r0 = KT + e * cap;
+    const T *__restrict r1 = r0 + cap, *__restrict r2 = r1 + cap, *__restrict r3 = r2 + cap;
+    for (int64_t j = 0; j < Lk; ++j)
+      out[j] = (((out[j] + q0 * widen(r0[j])) + q1 * widen(r1[j])) + q2 * widen(r2[j])) + q3 * widen(r3[j]);
   }
   for (; e < hd; ++e) {
     const float qe = q[e] * scale;
-    const float* __restrict r = KT + e * cap;
-    for (int64_t j = 0; j < Lk; ++j) out[j] += qe * r[j];
+    const T* __restrict r = KT + e * cap;
+    for (int64_t j = 0; j < Lk; ++j) out[j] += qe * widen(r[j]);
   }
+}
+GAIA_SIMD_CLONES void score_keys(const float* q, const float* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
+                                 float* __restrict out) {
+  score_keys_of(q, KT, cap, Lk, hd, scale, out);
+}
+GAIA_SIMD_CLONES void score_keys(const float* q, const uint16_t* KT, int64_t cap, int64_t Lk, int64_t hd, float scale,
+                                 float* __restrict out) {
+  score_keys_of(q, KT, cap, Lk, hd, scale, out);
 }
 
 // y = sum_j p[j] V[j] over Lk rows of hd floats, 32 components at a time in registers, even and odd rows in two
 // sets of sums (one chain of dependent multiply-adds would wait on each one's latency).
-GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, int64_t hd, float* y) {
+template <class T>
+[[gnu::always_inline]] inline void weighted_sum_of(const float* p, const T* V, int64_t Lk, int64_t hd, float* y) {
   constexpr int64_t kE = 32;
   int64_t e0 = 0;
   for (; e0 + kE <= hd; e0 += kE) {
@@ -83,22 +104,31 @@ GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, i
     int64_t j = 0;
     for (; j + 2 <= Lk; j += 2) {
       const float w0 = p[j], w1 = p[j + 1];
-      const float *v0 = V + j * hd + e0, *v1 = v0 + hd;
+      const T *v0 = V + j * hd + e0, *v1 = v0 + hd;
       for (int64_t e = 0; e < kE; ++e) {
-        even[e] += w0 * v0[e];
-        odd[e] += w1 * v1[e];
+        even[e] += w0 * widen(v0[e]);
+        odd[e] += w1 * widen(v1[e]);
       }
     }
     if (j < Lk)
-      for (int64_t e = 0; e < kE; ++e) even[e] += p[j] * V[j * hd + e0 + e];
+      for (int64_t e = 0; e < kE; ++e) even[e] += p[j] * widen(V[j * hd + e0 + e]);
     for (int64_t e = 0; e < kE; ++e) y[e0 + e] = even[e] + odd[e];
   }
   for (; e0 < hd; ++e0) {
     float a = 0;
-    for (int64_t j = 0; j < Lk; ++j) a += p[j] * V[j * hd + e0];
+    for (int64_t j = 0; j < Lk; ++j) a += p[j] * widen(V[j * hd + e0]);
     y[e0] = a;
   }
 }
+GAIA_SIMD_CLONES void weighted_sum(const float* p, const float* V, int64_t Lk, int64_t hd, float* y) {
+  weighted_sum_of(p, V, Lk, hd, y);
+}
+GAIA_SIMD_CLONES void weighted_sum(const float* p, const uint16_t* V, int64_t Lk, int64_t hd, float* y) {
+  weighted_sum_of(p, V, Lk, hd, y);
+}
+
+[[gnu::always_inline]] inline void store(float* to, float x) { *to = x; }
+[[gnu::always_inline]] inline void store(uint16_t* to, float x) { *to = c10::BFloat16(x).x; }  // rounded to nearest even
 
 // exp(x) of eight floats for x <= 0 (shifted scores), as Cephes' expf: x = n ln2 + r, exp(r) by a polynomial, 2^n
 // from the exponent bits; below -87.3 it gives 2^-126 (a weight of no account next to the row's maximum, 1).
@@ -150,21 +180,21 @@ GAIA_SIMD_CLONES void softmax_rows(float* s, int64_t rows, int64_t n) {
   }
 }
 
-// Sampling's case: one new token per row appended to a float32 CPU cache. The general path spends ~20 small
-// LibTorch operations per layer on views, cache writes and two batched products of a single query; here the cache
-// write and the scores are one pass over raw memory, then the softmax and one weighted sum (docs/benchmarks.md).
-void attend_one_cached(const float* in, int64_t B, int64_t d, int64_t heads, float* kc, float* vc, int64_t cap,
-                       int64_t offset, float* sc, float* y) {
+namespace {
+
+template <class T>
+void attend_rows(const float* in, int64_t B, int64_t d, int64_t heads, T* kc, T* vc, int64_t cap, int64_t offset,
+                 float* sc, float* y) {
   const int64_t hd = d / heads, Lk = offset + 1;
   const float scale = float(1.0 / std::sqrt(double(hd)));
-  // Pass 1: append this token's key and value, score the query against every cached key.
+  // Pass 1: append this token's key and value, score the query against every cached key, normalise.
   at::parallel_for(0, B * heads, 1, [&](int64_t begin, int64_t end) {
     for (int64_t bh = begin; bh < end; ++bh) {
       const int64_t b = bh / heads, h = bh % heads;
       const float* q = in + b * 3 * d + h * hd;
-      float* kb = kc + (bh * hd) * cap;  // KT[b, h, 0, 0]
-      for (int64_t e = 0; e < hd; ++e) kb[e * cap + offset] = q[d + e];
-      std::copy(q + 2 * d, q + 2 * d + hd, vc + (bh * cap + offset) * hd);
+      T* kb = kc + (bh * hd) * cap;  // KT[b, h, 0, 0]
+      T* vb = vc + (bh * cap + offset) * hd;
+      for (int64_t e = 0; e < hd; ++e) store(kb + e * cap + offset, q[d + e]), store(vb + e, q[2 * d + e]);
       score_keys(q, kb, cap, Lk, hd, scale, sc + bh * Lk);
       softmax_rows(sc + bh * Lk, 1, Lk);
     }
@@ -178,6 +208,27 @@ void attend_one_cached(const float* in, int64_t B, int64_t d, int64_t heads, flo
   });
 }
 
+}  // namespace
+
+bool fused_cache(const torch::Tensor& K, const torch::Tensor& V) {
+  return K.device().is_cpu() && K.is_contiguous() && V.is_contiguous() && K.scalar_type() == V.scalar_type() &&
+         (K.scalar_type() == torch::kFloat || K.scalar_type() == torch::kBFloat16);
+}
+
+// Sampling's case: one new token per row appended to a CPU cache. The general path spends ~20 small LibTorch
+// operations per layer on views, cache writes and two batched products of a single query; here the cache write and
+// the scores are one pass over raw memory, then the softmax and one weighted sum (docs/benchmarks.md).
+void attend_one_cached(const float* in, int64_t B, int64_t d, int64_t heads, torch::Tensor& K, torch::Tensor& V,
+                       int64_t offset, float* sc, float* y) {
+  if (!fused_cache(K, V)) fail("cached attention: the cache must be contiguous float32 or bf16 on the CPU");
+  const int64_t cap = K.size(3);
+  if (K.scalar_type() == torch::kFloat)
+    attend_rows(in, B, d, heads, K.data_ptr<float>(), V.data_ptr<float>(), cap, offset, sc, y);
+  else
+    attend_rows(in, B, d, heads, reinterpret_cast<uint16_t*>(K.data_ptr<at::BFloat16>()),
+                reinterpret_cast<uint16_t*>(V.data_ptr<at::BFloat16>()), cap, offset, sc, y);
+}
+
 // qkv [B, 3d] (per row: q | k | v, each H x hd) -> [B, d]; the cache grows by one at `offset`.
 torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
                                 int64_t heads) {
@@ -185,8 +236,7 @@ torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torc
   auto src = qkv.contiguous();
   auto out = torch::empty({B, d}, qkv.options());
   auto scores = torch::empty({B * heads, offset + 1}, qkv.options());
-  attend_one_cached(src.data_ptr<float>(), B, d, heads, K.data_ptr<float>(), V.data_ptr<float>(), K.size(3), offset,
-                    scores.data_ptr<float>(), out.data_ptr<float>());
+  attend_one_cached(src.data_ptr<float>(), B, d, heads, K, V, offset, scores.data_ptr<float>(), out.data_ptr<float>());
   return out;
 }
 
@@ -196,7 +246,7 @@ torch::Tensor CausalSelfAttentionImpl::forward(const torch::Tensor& x, KVCache* 
     auto& K = cache->k[static_cast<size_t>(layer)];
     auto& V = cache->v[static_cast<size_t>(layer)];
     TORCH_CHECK(cache->length < cache->capacity(), "KV cache overflow: ", cache->length, " + 1 > ", cache->capacity());
-    if (K.is_contiguous() && V.is_contiguous() && K.scalar_type() == torch::kFloat) {
+    if (fused_cache(K, V)) {
       auto x2 = x.view({B, d});  // 2-D products: LibTorch's linear pays for folding a 3-D input on every call
       // float32 attention over the cache; the projections take autocast's precision (bf16: their outputs are bf16)
       auto q_k_v = qkv->forward(x2).to(torch::kFloat);

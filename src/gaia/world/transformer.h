@@ -16,21 +16,22 @@ struct KVCache {
   std::vector<torch::Tensor> k, v;
   int64_t capacity() const { return k.empty() ? 0 : k[0].size(3); }
   int64_t length = 0;               // tokens cached
-  // One token per row on a float32 CPU cache takes the fused path (attention on raw memory); false forces the
-  // general LibTorch path, which tests and benchmarks use as the reference.
+  // One token per row on a float32 or bf16 CPU cache takes the fused path (attention on raw memory); false forces
+  // the general LibTorch path, which tests and benchmarks use as the reference.
   bool fused_single_token = true;
   void reset() { length = 0; }
 };
 
 // Sampling's case on raw memory: one new token per row, qkv [B, 3d] float32 (per row q | k | v, each H x hd), its
-// key and value written at `offset` of one layer's float32 CPU cache (K [B, H, hd, cap], V [B, H, cap, hd],
-// contiguous) -> [B, d], the token attending to the cache's first offset + 1 positions.
+// key and value written at `offset` of one layer's CPU cache (K [B, H, hd, cap], V [B, H, cap, hd], contiguous,
+// float32 or bf16) -> [B, d], the token attending to the cache's first offset + 1 positions.
 torch::Tensor attend_one_cached(const torch::Tensor& qkv, torch::Tensor& K, torch::Tensor& V, int64_t offset,
                                 int64_t heads);
-// The same on raw memory (the fused token step's): qkv [B, 3d], K [B, H, hd, cap], V [B, H, cap, hd], `scores` room
-// for B * H * (offset + 1) floats, y [B, d].
-void attend_one_cached(const float* qkv, int64_t B, int64_t d, int64_t heads, float* K, float* V, int64_t cap,
+// The same on raw memory (the fused token step's): qkv [B, 3d], y [B, d], `scores` room for B * H * (offset + 1)
+// floats. The cache may also be bf16 (RolloutOptions::precision): its keys and values are read widened to float32.
+void attend_one_cached(const float* qkv, int64_t B, int64_t d, int64_t heads, torch::Tensor& K, torch::Tensor& V,
                        int64_t offset, float* scores, float* y);
+bool fused_cache(const torch::Tensor& K, const torch::Tensor& V);  // contiguous float32 or bf16 on the CPU
 
 // Softmax of each of `rows` rows of n floats, in place (the cached attention's): exp as a vectorised polynomial,
 // within a few units in the last place of std::exp.
