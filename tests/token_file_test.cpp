@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -290,6 +292,32 @@ TEST(TokenFileCli, DataSplitGeofencesTokenFilesFromTheirSidecars) {
   EXPECT_EQ(read_file(dir / "drives" / "split.json"), before);
 }
 
+// The validation line's copy bias is fitted on held-out frames, not on the training frames the weights learn: a
+// drive whose training part never repeats a frame's code and whose held-out end repeats four codes in five gets a
+// large bias and a far lower calibrated score (fitted on its training windows, the bias would stay near 0).
+TEST(TokenFileCli, ValidationFitsTheCopyBiasOnHeldOutFrames) {
+  test::TempDir dir;
+  const int64_t frames = 400;  // at 20 fps, kept: the last 40 frames are the held-out tenth
+  std::vector<int64_t> v;
+  std::mt19937 rng(5);
+  for (int64_t f = 0; f < frames; ++f)
+    for (int64_t j = 0; j < 128; ++j)
+      v.push_back(f >= 360 && rng() % 5 != 0 ? v[size_t((f - 1) * 128 + j)] : comma_id(f, j));
+  npy_write(dir / "drive.npy", npy_make(DType::I64, {frames, 128}, v));
+  const std::string tiny = " --config " + test::q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  auto r = test::run_gaia("world train " + test::q(dir / "drive.npy") +
+                          " --grid 8x16 --codebook-size 1024 --token-fps 20 --keep-rate" + tiny +
+                          " --steps 4 --val-every 4 --out " + test::q(dir / "run"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  nlohmann::json val;
+  std::istringstream in(read_file(dir / "run" / "metrics.jsonl"));
+  for (std::string line; std::getline(in, line);)
+    if (auto j = nlohmann::json::parse(line); j.contains("val") && !j["val"].is_null()) val = j["val"];
+  ASSERT_TRUE(val.contains("copy_bias")) << r.output;
+  EXPECT_GT(val["copy_bias"].get<double>(), 2.0) << val.dump();
+  EXPECT_LT(val["bits_per_token"].get<double>(), val["bits_per_token_uncalibrated"].get<double>() - 2.0) << val.dump();
+}
+
 TEST(TokenFileCli, CommaVqMinuteTrainsWithValidationAndRefusesSteering) {
   test::TempDir dir;
   const auto file = write_comma(dir / "minute.npy", 400, DType::I16);  // 20 s at 20 fps -> 125 steps at 6.25 Hz
@@ -302,7 +330,7 @@ TEST(TokenFileCli, CommaVqMinuteTrainsWithValidationAndRefusesSteering) {
   EXPECT_EQ(r.output.find("validation skipped"), std::string::npos) << r.output;  // its held-out end is scored
   EXPECT_NE(r.output.find("bits/token"), std::string::npos) << r.output;
   // Random ids never repeat a frame's: no copy bias to fit, said once, and the run goes on without it.
-  EXPECT_NE(r.output.find("copy calibration off: none of the training tokens"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("copy calibration off: none of the held-out tokens"), std::string::npos) << r.output;
   // The best validation's weights are kept beside the last ones.
   EXPECT_NE(r.output.find("best validation"), std::string::npos) << r.output;
   EXPECT_TRUE(fs::exists(dir / "run" / "best.safetensors"));

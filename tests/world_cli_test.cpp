@@ -438,7 +438,10 @@ TEST(WorldCli, ValidationCalibratesTheCopyBiasItWrites) {
                      " --max-windows 64 --out " + q(p.dir / "cal-eval"));
   ASSERT_EQ(r.status, 0) << r.output;
   const auto e = nlohmann::json::parse(read_file(p.dir / "cal-eval" / "eval.json"));
-  EXPECT_NEAR(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token"].get<double>(), 1e-6);
+  // The validation line scores each half of the held-out windows with the other half's fit; the eval scores them all
+  // with the weights' bias, the two fits' mean: near it, and never above the uncalibrated score by much.
+  EXPECT_NEAR(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token"].get<double>(), 0.05);
+  EXPECT_LT(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token_uncalibrated"].get<double>() + 1e-3);
   r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 4 --val-every 4 --no-calibrate --out " +
                      q(p.dir / "uncal-run"));
   ASSERT_EQ(r.status, 0) << r.output;

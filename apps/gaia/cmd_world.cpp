@@ -55,7 +55,7 @@ void register_world(CLI::App& app) {
                     "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
                     "not carried over: each validation fits it again)");
     cmd->add_flag("--no-calibrate", [o](int64_t) { o->calibrate = false; },
-                  "do not fit world.copy_bias at each validation (on as many training windows as it scores held-out ones) "
+                  "do not fit world.copy_bias at each validation (on the held-out windows, each half scored with the other half's fit) "
                   "nor write it with the weights: the paper's model, bias 0 (or the config's)");
     cmd->add_option("--train-only", o->train_only,
                     "train only the parameters whose names start with these (comma-separated, e.g. "

@@ -128,8 +128,17 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
   auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
-  auto calibration_windows =
-      opt.calibrate && !val_windows.empty() ? validation_windows(ds, train_eps, T, opt.val_windows) : std::vector<Window>{};
+  // Copy calibration at each validation (opt.calibrate), fitted on the held-out windows in two halves, each half
+  // scored with the bias the other half gives: the bias fits frames the weights have not learned (fitted on
+  // training windows, a model that memorises them asks for less copying the longer it trains, most of all on a
+  // small dataset), and no score is of tokens its own bias was fitted to. One held-out window: training windows.
+  std::vector<std::vector<Window>> calibration;
+  if (opt.calibrate && val_windows.size() >= 2) {
+    calibration.resize(2);
+    for (size_t i = 0; i < val_windows.size(); ++i) calibration[i % 2].push_back(val_windows[i]);
+  } else if (opt.calibrate && !val_windows.empty()) {
+    calibration.push_back(validation_windows(ds, train_eps, T, opt.val_windows));
+  }
 
   torch::manual_seed(cfg.run.seed);
   WorldModel model(wc, ds.tokens_per_step(), ds.codebook_size());
@@ -264,22 +273,32 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
       v[name] = s.nats;
     }
     v["bits_per_token"] = v["action"].get<double>() / std::log(2.0);
-    if (!calibration_windows.empty()) {
-      const auto c = calibrate_copy_bias(model, ds, calibration_windows, text, ConditioningMix::from(wc), wc.batch_size);
-      if (!c.fitted) {  // tokens that never (or always) repeat a frame's: nothing to fit, now or later
-        note(fmt::format("copy calibration off: {} of the training tokens with a previous frame in view repeat it",
-                         c.copy_rate > 0 ? "all" : "none"));
-        calibration_windows.clear();
-        model->train();
-        return v;
+    if (!calibration.empty()) {
+      std::vector<CopyCalibration> fits;
+      for (const auto& windows : calibration) {
+        fits.push_back(calibrate_copy_bias(model, ds, windows, text, ConditioningMix::from(wc), wc.batch_size));
+        if (!fits.back().fitted) {  // tokens that never (or always) repeat a frame's: nothing to fit, now or later
+          note(fmt::format("copy calibration off: {} of the {} tokens with a previous frame in view repeat it",
+                           fits.back().copy_rate > 0 ? "all" : "none", calibration.size() == 2 ? "held-out" : "training"));
+          calibration.clear();
+          model->train();
+          return v;
+        }
       }
-      fitted_copy_bias = c.bias;
-      model->cfg.copy_bias = c.bias;
       ScoreOptions so;
       so.batch = wc.batch_size;
+      double nats = 0, bias = 0;
+      int64_t tokens = 0, fitted_on = 0;
+      for (size_t h = 0; h < fits.size(); ++h) {
+        model->cfg.copy_bias = fits[fits.size() - 1 - h].bias;  // the other half's (one set: its own)
+        const auto s = score(model, ds, fits.size() == 2 ? calibration[h] : val_windows, text, so);
+        nats += s.nats * double(s.tokens), tokens += s.tokens;
+        bias += fits[h].bias * double(fits[h].tokens), fitted_on += fits[h].tokens;
+      }
+      fitted_copy_bias = bias / double(std::max<int64_t>(fitted_on, 1));  // what the weights carry
       v["bits_per_token_uncalibrated"] = v["bits_per_token"];
-      v["bits_per_token"] = score(model, ds, val_windows, text, so).bits();
-      v["copy_bias"] = c.bias;
+      v["bits_per_token"] = nats / double(std::max<int64_t>(tokens, 1)) / std::log(2.0);
+      v["copy_bias"] = fitted_copy_bias;
       model->cfg.copy_bias = wc.copy_bias;
     }
     model->train();
