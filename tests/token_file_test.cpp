@@ -316,6 +316,18 @@ TEST(TokenFileCli, ValidationFitsTheCopyBiasOnHeldOutFrames) {
   ASSERT_TRUE(val.contains("copy_bias")) << r.output;
   EXPECT_GT(val["copy_bias"].get<double>(), 2.0) << val.dump();
   EXPECT_LT(val["bits_per_token"].get<double>(), val["bits_per_token_uncalibrated"].get<double>() - 2.0) << val.dump();
+  // Without --val-every a set this small is validated every two passes over it (357 training windows of 4 steps,
+  // 4 a batch: 44 steps), not every 250 steps, past which it would have overfitted long before.
+  r = test::run_gaia("world train " + test::q(dir / "drive.npy") +
+                     " --grid 8x16 --codebook-size 1024 --token-fps 20 --keep-rate" + tiny + " --steps 50 --out " +
+                     test::q(dir / "auto"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("validating every 44 steps"), std::string::npos) << r.output;
+  std::vector<int> validated;
+  std::istringstream again(read_file(dir / "auto" / "metrics.jsonl"));
+  for (std::string line; std::getline(again, line);)
+    if (auto j = nlohmann::json::parse(line); j.contains("val") && !j["val"].is_null()) validated.push_back(j["step"]);
+  EXPECT_EQ(validated, (std::vector<int>{44, 50}));
 }
 
 TEST(TokenFileCli, CommaVqMinuteTrainsWithValidationAndRefusesSteering) {

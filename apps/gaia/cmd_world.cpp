@@ -49,7 +49,9 @@ void register_world(CLI::App& app) {
                     "of them (.npy / .safetensors; see --grid)")->required();
     add_token_format_flags(cmd, format.get());
     cmd->add_option("--steps", o->steps, "total steps (default: config world.steps)")->check(number_in({1, 1e9}));
-    cmd->add_option("--val-every", o->val_every, "steps between validations (0 = only at the end)");
+    cmd->add_option("--val-every", o->val_every,
+                    "steps between validations (0 = only at the end; default: 250, or two passes over a small "
+                    "training set where that is sooner)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init,
                     "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "

@@ -77,6 +77,13 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     fail("{}: no training window of {} steps (world.context_steps); episodes are too short", opt.tokens.string(), T);
   WindowSampler sampler(ds, train_windows, ds.foreign() ? std::vector<std::string>{} : cfg.data.balance_world,
                         cfg.data.balance_exponent, cfg.data.balance_bins);
+  int val_every = opt.val_every;
+  if (val_every < 0) {  // two passes over the training steps, each step seeing batch_size windows of T steps
+    const int64_t pass = int64_t(train_windows.size()) / std::max<int64_t>(1, int64_t(wc.batch_size) * T);
+    val_every = int(std::clamp<int64_t>(2 * pass, 25, 250));
+    if (val_every < 250)
+      note(fmt::format("validating every {} steps: two passes over this small a training set", val_every));
+  }
   // Fine-tuning keeps the --init model's vocabulary (on other data, word counts would renumber the words its
   // text embeddings were trained on), also when a fine-tuning run resumes.
   WorldModel init{nullptr};
@@ -394,7 +401,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     log.distill_other = kl_other;
     log.tokens_per_s = double(tokens_per_batch) /
                        std::max(1e-9, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    if (main && loop.validate_now(step, opt.val_every)) {
+    if (main && loop.validate_now(step, val_every)) {
       validated = true;
       log.validation = true;
       log.val = validate();

@@ -29,11 +29,13 @@ struct WorldTrainOptions {
   // of this dataset's words. Implied when `text` gives the model another text than --init's (another encoder).
   bool fresh_text = false;
   int steps = -1;             // -1: config world.steps
-  int val_every = 250;
+  // Steps between validations; -1: 250, or two passes over the training data where that comes sooner (at least 25):
+  // a small set overfits within a few hundred steps, and the best checkpoint would fall between validations.
+  int val_every = -1;
   size_t val_windows = 64;    // held-out windows scored at each validation
-  // Copy calibration in the recipe (world/calibrate.h): at each validation world.copy_bias is fitted on as many
-  // training windows, the held-out windows are scored with it (bits_per_token; bits_per_token_uncalibrated beside
-  // it), and the weights written (latest, best, final) carry it. Training itself runs with the config's copy_bias.
+  // Copy calibration in the recipe (world/calibrate.h): at each validation world.copy_bias is fitted on the held-out
+  // windows, cross-fitted in two halves (bits_per_token; bits_per_token_uncalibrated beside it), and the weights
+  // written (latest, best, final) carry it. Training itself runs with the config's copy_bias.
   bool calibrate = true;
   int stop_after = -1;        // stop (with a checkpoint) after this many steps of this run
   // Train only the parameters whose names start with one of these (e.g. "curvature_mlp"); empty = all. The rest
