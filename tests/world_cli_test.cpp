@@ -442,6 +442,16 @@ TEST(WorldCli, ValidationCalibratesTheCopyBiasItWrites) {
   // with the weights' bias, the two fits' mean: near it, and never above the uncalibrated score by much.
   EXPECT_NEAR(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token"].get<double>(), 0.05);
   EXPECT_LT(e["bits_per_token"]["world_model"].get<double>(), v["bits_per_token_uncalibrated"].get<double>() + 1e-3);
+  EXPECT_EQ(e["precision"], "fp32");
+  // --precision bf16 scores with bf16 products where the CPU has them (else fp32, said): near fp32's figure.
+  r = test::run_gaia("world eval " + q(p.tokens) + " --world " + q(p.dir / "cal-run" / "world.safetensors") + p.tiny() +
+                     " --max-windows 64 --precision bf16 --out " + q(p.dir / "cal-eval-bf16"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto b = nlohmann::json::parse(read_file(p.dir / "cal-eval-bf16" / "eval.json"));
+  EXPECT_EQ(b["precision"], cpu_has_bf16() ? "bf16" : "fp32");
+  EXPECT_NEAR(b["bits_per_token"]["world_model"].get<double>(), e["bits_per_token"]["world_model"].get<double>(), 0.05);
+  if (cpu_has_bf16())
+    EXPECT_NE(b["bits_per_token"]["world_model"].get<double>(), e["bits_per_token"]["world_model"].get<double>());
   r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 4 --val-every 4 --no-calibrate --out " +
                      q(p.dir / "uncal-run"));
   ASSERT_EQ(r.status, 0) << r.output;

@@ -7,6 +7,7 @@
 #include "common.h"
 #include "gaia/core/error.h"
 #include "gaia/core/progress.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/world/calibrate.h"
 #include "gaia/world/evaluate.h"
@@ -176,11 +177,19 @@ void register_world(CLI::App& app) {
       eo.footage = world::parse_footage(*footage);
       eo.name = *tokens;
       eo.weights = *weights;
+      // --precision: the products of every scoring pass in bf16 (where this device does it), as sampling runs them.
+      const auto dev = model->token_embedding->weight.device();
+      const Precision precision = run_precision(run, dev, "world eval");
       std::unique_ptr<ProgressBar> bar;
-      auto j = world::evaluate_world(model, info, ds, eo, [&](int done, int total) {
-        if (!bar) bar = std::make_unique<ProgressBar>(total, "world eval");
-        bar->update(done);
-      });
+      nlohmann::json j;
+      {
+        Autocast autocast(precision, dev);
+        j = world::evaluate_world(model, info, ds, eo, [&](int done, int total) {
+          if (!bar) bar = std::make_unique<ProgressBar>(total, "world eval");
+          bar->update(done);
+        });
+      }
+      j["precision"] = to_string(precision);
       if (bar) bar->finish();
       std::printf("%s\n", j.dump(2).c_str());
       if (!flags->out.empty()) world::write_world_eval(j, flags->out);
