@@ -249,8 +249,7 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       continue;
     }
     auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
-    if (k > 0 && model_->cfg.copy_bias != 0)  // as in WorldModelImpl::forward
-      lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);
+    if (biased) lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);
     torch::Tensor tok;
     if (guided_) {
       auto c = lg.narrow(0, 0, N_);

@@ -46,34 +46,43 @@ void TokenChoice::operator()(const float* logits, int64_t N, int64_t K, const in
   thread_local std::vector<float> cond, guide_row, weights;
   thread_local std::vector<int64_t> ids;
   cond.resize(size_t(K));
-  if (guided) guide_row.resize(size_t(K));
   const float bias = float(copy_bias);
   const float a = float(1.0 + s), b = float(s);  // as guide(): (1 + s) c - s u, each scalar as float
   const int64_t k = std::min<int64_t>(sampling.top_k, K);
+  const bool argmax = sampling.strategy == Strategy::Argmax;
   for (int64_t r = 0; r < N; ++r) {
     std::memcpy(cond.data(), logits + r * K, sizeof(float) * size_t(K));
     if (prev) cond[size_t(prev[r])] += bias;  // with_copy_bias
-    const float* v = cond.data();             // what is ranked and drawn from
-    if (guided) {
-      const float* u = logits + (N + r) * K;
-      for (int64_t j = 0; j < K; ++j) {
-        const float uj = prev && j == prev[N + r] ? u[j] + bias : u[j];
-        const float cj = a * cond[size_t(j)], sj = b * uj;
-        guide_row[size_t(j)] = cj - sj;
+    const float* u = guided ? logits + (N + r) * K : nullptr;
+    auto guided_at = [&](int64_t j) {  // eq. 2 at code j
+      const float uj = prev && j == prev[N + r] ? u[j] + bias : u[j];
+      const float cj = a * cond[size_t(j)], sj = b * uj;
+      return cj - sj;
+    };
+    if (guided && within && !argmax) {
+      // The candidates are the conditional top k: the guided logits are needed at those k codes only.
+      top_k_ids(cond.data(), K, k, ids);
+      weights.resize(ids.size());
+      for (size_t j = 0; j < ids.size(); ++j) weights[j] = guided_at(ids[j]);
+    } else {
+      const float* v = cond.data();  // what is ranked and drawn from
+      if (guided) {
+        guide_row.resize(size_t(K));
+        for (int64_t j = 0; j < K; ++j) guide_row[size_t(j)] = guided_at(j);
+        v = guide_row.data();
       }
-      v = guide_row.data();
+      if (argmax) {
+        out[r] = first_max(v, K);
+        continue;
+      }
+      top_k_ids(v, K, k, ids);  // the k highest of the (guided) logits
+      weights.resize(ids.size());
+      for (size_t j = 0; j < ids.size(); ++j) weights[j] = v[ids[j]];
     }
-    if (sampling.strategy == Strategy::Argmax) {
-      out[r] = first_max(v, K);
-      continue;
-    }
-    // Top-k: the candidates are the k highest of the guided logits, or with `within` of the conditional ones.
-    top_k_ids(guided && within ? cond.data() : v, K, k, ids);
-    const float t = float(sampling.temperature);
-    weights.resize(ids.size());
+    const float t = float(sampling.temperature);  // softmax of the candidates' logits / t, unnormalised
     float top = -std::numeric_limits<float>::infinity();
-    for (size_t j = 0; j < ids.size(); ++j) top = std::max(top, v[ids[j]] / t);
-    for (size_t j = 0; j < ids.size(); ++j) weights[j] = std::exp(v[ids[j]] / t - top);  // softmax, unnormalised
+    for (float& w : weights) top = std::max(top, w / t);
+    for (float& w : weights) w = std::exp(w / t - top);
     out[r] = draw_token(ids.data(), weights.data(), k, gen);
   }
 }
