@@ -289,6 +289,48 @@ TEST(WorldData, WindowsNeverCrossEpisodes) {
   EXPECT_NE(test::error_of([&] { ds.windows({0}, 4, 0); }).find("stride"), std::string::npos);
 }
 
+// Stream windows score each frame of an episode once, the first window whole and each later one its last T/2 steps
+// (with T/2 steps before them in view); capped, whole episodes give contiguous runs from their middle. score()
+// counts only the scored steps, and a window's score is the mean cross-entropy of exactly those.
+TEST(WorldData, StreamWindowsScoreEachFrameOnce) {
+  test::TempDir dir;
+  TokenDataset ds(make_small(dir));  // 8, 3 and 10 steps
+  auto ws = world::stream_windows(ds, {0, 1, 2}, 4, 100);
+  std::vector<world::Window> want{{0, 0, 4, 0}, {0, 2, 4, 2}, {0, 4, 4, 2}, {2, 0, 4, 0}, {2, 2, 4, 2}, {2, 4, 4, 2},
+                                  {2, 6, 4, 2}};
+  EXPECT_EQ(ws, want);
+  for (size_t e : {size_t(0), size_t(2)}) {
+    std::vector<int> times(size_t(ds.steps(e)), 0);
+    for (auto& w : ws)
+      if (w.episode == e)
+        for (int64_t t = w.start + w.scored_from; t < w.start + w.steps; ++t) ++times[size_t(t)];
+    for (int n : times) EXPECT_EQ(n, 1) << "episode " << e;
+  }
+  // Capped: one window per episode, scored whole; two per episode, contiguous from the middle.
+  EXPECT_EQ(world::stream_windows(ds, {0, 2}, 4, 2), (std::vector<world::Window>{{0, 2, 4, 0}, {2, 2, 4, 0}}));
+  EXPECT_EQ(world::stream_windows(ds, {0, 2}, 4, 5),
+            (std::vector<world::Window>{{0, 0, 4, 0}, {0, 2, 4, 2}, {2, 2, 4, 0}, {2, 4, 4, 2}}));
+  EXPECT_TRUE(world::stream_windows(ds, {1}, 4, 10).empty());
+  auto keep = world::scored_steps(ws, 1, 2, 4, 1);  // windows 1, 2 from step 1: steps 2 and 3 scored
+  EXPECT_TRUE(torch::equal(keep.squeeze(-1), torch::tensor({{0, 1, 1}, {0, 1, 1}}, torch::kBool)));
+
+  Config c = test::config("tiny.yaml");
+  ASSERT_EQ(c.world.context_steps, 4);
+  torch::manual_seed(1);
+  world::WorldModel m(c.world, kN, kK);
+  const world::TextSource none(nullptr);
+  world::ScoreOptions so;
+  so.mode = Conditioning::kUnconditional;
+  auto all = world::score(m, ds, ws, none, so);
+  EXPECT_EQ(all.tokens, (8 + 10) * kN);
+  auto one = world::score(m, ds, {ws[1]}, none, so);
+  EXPECT_EQ(one.tokens, 2 * kN);
+  torch::NoGradGuard ng;
+  WorldBatch b = world::batch_at(ds, {ws[1]}, 0, 1, none, c.world.text_tokens, ConditioningMix{1, 0, 0});
+  auto lp = torch::log_softmax(m->forward(b), -1).gather(-1, b.tokens.unsqueeze(-1));  // [1, 4, n, 1]
+  EXPECT_NEAR(one.nats, -lp.slice(1, 2).mean().item<double>(), 1e-5);
+}
+
 TEST(WorldData, ConditioningModesFollowTheMix) {
   test::TempDir dir;
   TokenDataset ds(make_small(dir));

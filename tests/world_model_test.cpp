@@ -449,10 +449,11 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
   p.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
   const int threads = at::get_num_threads();
   for (int one_thread : {0, 1})  // one intra-op thread: the next window is encoded ahead on a second thread
-  for (double bias : {0.0, 1.5})
+  for (auto [bias, run] : std::vector<std::pair<double, double>>{{0.0, 0.0}, {1.5, 0.0}, {1.5, 3.0}})
   for (int stride : {1, 2, int(T) - 1}) {
   at::set_num_threads(one_thread ? 1 : threads);
-  m->cfg.copy_bias = bias;  // the rollout adds world.copy_bias exactly where forward() does
+  m->cfg.copy_bias = bias;  // the rollout adds the copy bias exactly where forward() does
+  m->cfg.copy_bias_run = run;
   RolloutOptions o;
   o.frames = int(F);
   o.sampling.strategy = Strategy::Argmax;
@@ -471,11 +472,11 @@ TEST(WorldRollout, ArgmaxRolloutIsConsistentAcrossTheSlidingWindow) {
     b.text_ids = p.text_ids.narrow(0, k0, k - k0 + 1).unsqueeze(0);
     auto want = m->forward(b).select(1, k - k0).argmax(-1);  // [1, n]
     EXPECT_TRUE(torch::equal(want[0], r.tokens[0][k]))
-        << "frame " << k << ", stride " << stride << ", bias " << bias << ", one thread " << one_thread;
+        << "frame " << k << ", stride " << stride << ", bias " << bias << " + " << run << ", one thread " << one_thread;
   }
   }
   at::set_num_threads(threads);
-  m->cfg.copy_bias = 0;
+  m->cfg.copy_bias = m->cfg.copy_bias_run = 0;
   RolloutOptions bad;
   bad.window_stride = int(T);
   EXPECT_NE(test::error_of([&] { rollout(m, p, bad); }).find("window stride"), std::string::npos);
@@ -531,7 +532,7 @@ TEST(WorldRollout, LookaheadAndForksMidFrameGiveTheSameTokens) {
 
 // The raw per-token choice (token_choice.h, with the fused step) and the LibTorch one (copy bias, guide, keep_top_k,
 // sample_tokens, with the general path) choose the same tokens: argmax, top-k, guided within the conditional top k,
-// text-guided over all codes, and the copy bias on the previous frame's code.
+// text-guided over all codes, and the copy bias on the previous frame's code (one for every slot, and more in runs).
 TEST(WorldRollout, RawTokenChoiceGivesTheLibTorchPathsTokens) {
   Config c = test::config("tiny.yaml");
   const int64_t n = 12, K = 64;
@@ -546,7 +547,7 @@ TEST(WorldRollout, RawTokenChoiceGivesTheLibTorchPathsTokens) {
   p.actions = torch::randn({P + F, 2});
   const int threads = at::get_num_threads();
   at::set_num_threads(1);
-  for (const int setting : {0, 1, 2, 3, 4}) {
+  for (const int setting : {0, 1, 2, 3, 4, 5}) {
     SCOPED_TRACE("setting " + std::to_string(setting));
     RolloutOptions o;
     o.frames = int(F);
@@ -557,12 +558,13 @@ TEST(WorldRollout, RawTokenChoiceGivesTheLibTorchPathsTokens) {
     if (setting == 0) o.sampling.strategy = Strategy::Argmax;
     if (setting >= 2) o.guidance.scale = 3;  // 2: actions, within the conditional top k
     if (setting == 3) q.text_ids = torch::randint(0, c.world.text_vocab, {P + F, c.world.text_tokens}, torch::kLong);
-    if (setting == 4) m->cfg.copy_bias = 1.5;
+    if (setting >= 4) m->cfg.copy_bias = 1.5;
+    if (setting == 5) m->cfg.copy_bias_run = 2.5;
     o.fused_tokens = false;
     auto general = rollout(m, q, o).tokens;
     o.fused_tokens = true;
     auto raw = rollout(m, q, o).tokens;
-    m->cfg.copy_bias = 0;
+    m->cfg.copy_bias = m->cfg.copy_bias_run = 0;
     EXPECT_TRUE(torch::equal(general, raw));
     if (setting > 0) EXPECT_GT(std::get<0>(at::_unique(raw.narrow(1, P, F))).numel(), 8);  // it does sample
   }
@@ -807,6 +809,36 @@ TEST(WorldModel, CopyBiasRaisesOnlyThePreviousFramesCode) {
   EXPECT_FALSE(torch::equal(free.tokens[0][2], p.tokens[1]));
 }
 
+// world.copy_bias_run adds its logit on top where the slot before (i - 1, the same frame) kept its code, never at
+// slot 0, and the rollout's bias per slot is forward()'s (CopyBias::at against per_slot).
+TEST(WorldModel, CopyBiasRunAddsWhereTheSlotBeforeKeptItsCode) {
+  Config c = test::config("tiny.yaml");
+  auto m = small_model(c, 2);
+  torch::NoGradGuard ng;
+  auto b = random_batch(c, 2, 3);
+  b.tokens[0][1].narrow(0, 0, kModelN / 2).copy_(b.tokens[0][0].narrow(0, 0, kModelN / 2));  // a run of kept codes
+  b.tokens[1][2].copy_(b.tokens[1][1]);                                                        // a whole frame kept
+  auto base = m->forward(b);
+  m->cfg.copy_bias = 0.75;
+  m->cfg.copy_bias_run = 0.5;
+  auto biased = m->forward(b);
+  m->cfg.copy_bias = m->cfg.copy_bias_run = 0;
+  auto want = torch::zeros_like(base);
+  int64_t runs = 0;
+  const CopyBias copy{0.75, 0.5};
+  for (int64_t x = 0; x < 2; ++x)
+    for (int64_t t = 1; t < 3; ++t)
+      for (int64_t i = 0; i < kModelN; ++i) {
+        const bool run = i > 0 && b.tokens[x][t][i - 1].item<int64_t>() == b.tokens[x][t - 1][i - 1].item<int64_t>();
+        runs += run;
+        want[x][t][i][b.tokens[x][t - 1][i].item<int64_t>()] = copy.at(run);
+      }
+  EXPECT_GE(runs, kModelN / 2 - 1 + kModelN - 1);
+  EXPECT_TRUE(torch::allclose(biased - base, want, 0, 1e-5));
+  EXPECT_DOUBLE_EQ(copy.at(true), 1.25);
+  EXPECT_DOUBLE_EQ(copy.at(false), 0.75);
+}
+
 // The fit: with outcomes drawn from p0 raised by a known bias, the maximum-likelihood bias is found again, and at the
 // optimum the expected number of copies equals the observed one. Degenerate outcomes are an error.
 TEST(WorldCalibration, FitRecoversAKnownCopyBias) {
@@ -824,4 +856,23 @@ TEST(WorldCalibration, FitRecoversAKnownCopyBias) {
   EXPECT_NE(test::error_of([&] { fit_copy_bias(p0.log(), torch::zeros({N})); }).find("no finite optimum"),
             std::string::npos);
   EXPECT_NE(test::error_of([&] { fit_copy_bias(p0.log(), torch::zeros({3})); }).find("as many"), std::string::npos);
+}
+
+// Slots after a kept code copied with a larger bias than the others: both are found again; where the slots of one
+// kind never copy, one bias is fitted for all.
+TEST(WorldCalibration, FitFindsTheRunsOwnBias) {
+  torch::manual_seed(4);
+  const int64_t N = 200000;
+  auto p0 = torch::rand({N}, torch::kDouble) * 0.45 + 0.05;
+  auto run = torch::rand({N}) < 0.3;
+  const double b = 0.4, r = 1.6;
+  auto bias = torch::where(run, torch::full({N}, b + r, torch::kDouble), torch::full({N}, b, torch::kDouble));
+  auto pb = p0 * bias.exp() / (1 - p0 + p0 * bias.exp());
+  auto y = (torch::rand({N}, torch::kDouble) < pb).to(torch::kDouble);
+  const CopyBias fit = fit_copy_biases(p0.log(), y, run);
+  EXPECT_NEAR(fit.bias, b, 0.04);
+  EXPECT_NEAR(fit.run, r, 0.08);
+  const CopyBias one = fit_copy_biases(p0.log(), y * (~run).to(torch::kDouble), run);
+  EXPECT_EQ(one.run, 0.0);
+  EXPECT_NEAR(one.bias, fit_copy_bias(p0.log(), y * (~run).to(torch::kDouble)), 1e-9);
 }

@@ -7,7 +7,7 @@ The loop, as the C++ one:
   - every step's tokens enter a KV cache (one [B, H, capacity, hd] key and value tensor per layer);
   - a prompt frame is one step (text, image, actions) appended at once;
   - a generated frame: its text tokens, then n image tokens one at a time, each predicted from the previous
-    position's output (head after ln_f), with the copy bias (model.cpp with_copy_bias) on the previous frame's
+    position's output (head after ln_f), with the copy bias (model.h CopyBias) on the previous frame's
     token at that slot, chosen by argmax or top-k (softmax of the k highest / temperature, one torch.multinomial
     draw, rank -> token: gaia draws from the same distribution with one uniform number, so the sampled tokens
     differ while the work compares), then its action tokens;
@@ -56,7 +56,7 @@ def load_world(path):
     model = WorldModel(cfg, grid["h"] * grid["w"], grid["K"]).eval()
     model.load_gaia(tensors, path)
     sampling = {"top_k": int(world["top_k"]), "temperature": float(world["temperature"]),
-                "copy_bias": float(world["copy_bias"])}
+                "copy_bias": float(world["copy_bias"]), "copy_bias_run": float(world.get("copy_bias_run", 0))}
     return model, sampling
 
 
@@ -96,7 +96,7 @@ def body(model, x, cache):
 
 
 def rollout(model, prompt, actions, frames, futures=1, strategy="top-k", top_k=50, temperature=1.0, copy_bias=0.0,
-            seed=0):
+            seed=0, copy_bias_run=0.0):
     """prompt: int64 [P, n]; actions: float32 [P + frames, 2] normalised (NaN: none) or None -> [N, P + F, n]."""
     N, P, n, T, d = futures, prompt.shape[0], model.n, model.T, model.d
     steps = P + frames
@@ -126,8 +126,12 @@ def rollout(model, prompt, actions, frames, futures=1, strategy="top-k", top_k=5
             nxt = model.head(h[:, -1])  # [N, K] predicting z_0
             for i in range(n):
                 lg = nxt
-                if k > 0 and copy_bias != 0:
-                    lg = lg.scatter_add(-1, tokens[:, k - 1, i:i + 1], torch.full((N, 1), copy_bias))
+                if k > 0 and (copy_bias != 0 or copy_bias_run != 0):
+                    # model.h CopyBias: copy_bias_run more where slot i - 1 kept its previous frame's code
+                    run = (tokens[:, k, i - 1] == tokens[:, k - 1, i - 1]) if i > 0 else torch.zeros(N, dtype=torch.bool)
+                    bias = torch.where(run, torch.tensor(copy_bias + copy_bias_run, dtype=torch.float64),
+                                       torch.tensor(copy_bias, dtype=torch.float64)).to(lg.dtype).view(N, 1)
+                    lg = lg.scatter_add(-1, tokens[:, k - 1, i:i + 1], bias)
                 if strategy == "argmax":
                     tok = lg.argmax(-1)
                 else:
@@ -207,7 +211,8 @@ def main():
     if args.check:
         if world is None:
             sys.exit("rollout_torch.py --check: the gaia Python module is not importable (PYTHONPATH=build/python)")
-        peer = rollout(model, prompt, normalised(actions), args.frames, strategy="argmax", copy_bias=s["copy_bias"])
+        peer = rollout(model, prompt, normalised(actions), args.frames, strategy="argmax", copy_bias=s["copy_bias"],
+                       copy_bias_run=s["copy_bias_run"])
         ours = gaia_rollout(world, prompt, actions, args.frames, 1, "argmax", 0)
         same = torch.equal(peer, ours)
         print(json.dumps({"frames": args.frames, "tokens": peer[:, P:].numel(), "identical": same,
@@ -218,7 +223,8 @@ def main():
     for futures in (1, 16):
         row = {"futures": futures}
         sides = [("peer", lambda: rollout(model, prompt, normalised(actions), args.frames, futures, "top-k",
-                                          s["top_k"], s["temperature"], s["copy_bias"]))]
+                                          s["top_k"], s["temperature"], s["copy_bias"],
+                                          copy_bias_run=s["copy_bias_run"]))]
         if world is not None:
             sides.append(("gaia", lambda: gaia_rollout(world, prompt, actions, args.frames, futures, "top-k", 0)))
         for name, run in sides:

@@ -55,11 +55,12 @@ void register_world(CLI::App& app) {
                     "training set where that is sooner)");
     cmd->add_option("--stop-after", o->stop_after, "stop after this many steps of this run (checkpointed)")->check(number_in({1, 1e9}));
     cmd->add_option("--init", o->init,
-                    "start from these world model weights (fine-tuning; ignored when resuming; their world.copy_bias is "
-                    "not carried over: each validation fits it again)");
+                    "start from these world model weights (fine-tuning; ignored when resuming; their copy bias is not "
+                    "carried over: each validation fits it again)");
     cmd->add_flag("--no-calibrate", [o](int64_t) { o->calibrate = false; },
-                  "do not fit world.copy_bias at each validation (on the held-out windows, each half scored with the other half's fit) "
-                  "nor write it with the weights: the paper's model, bias 0 (or the config's)");
+                  "do not fit the copy bias (world.copy_bias, world.copy_bias_run) at each validation (on the held-out "
+                  "windows, each half scored with the other half's fit) nor write it with the weights: the paper's "
+                  "model, bias 0 (or the config's)");
     cmd->add_option("--train-only", o->train_only,
                     "train only the parameters whose names start with these (comma-separated, e.g. "
                     "speed_mlp,curvature_mlp); the rest stay as --init gave them")
@@ -125,8 +126,8 @@ void register_world(CLI::App& app) {
             if (l.validation && !l.val.empty()) {
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
               if (l.val.contains("copy_bias"))  // calibrated in the recipe: the bias and what it gained
-                info += fmt::format(" (copy bias {:.2f}; {:.3f} without)", l.val["copy_bias"].get<double>(),
-                                    l.val["bits_per_token_uncalibrated"].get<double>());
+                info += fmt::format(" (copy bias {:.2f}{:+.2f} in runs; {:.3f} without)", l.val["copy_bias"].get<double>(),
+                                    l.val.value("copy_bias_run", 0.0), l.val["bits_per_token_uncalibrated"].get<double>());
             }
             bar->update(l.step, info);
           },
@@ -198,8 +199,9 @@ void register_world(CLI::App& app) {
 
   {
     auto* cmd = world->add_subcommand(
-        "calibrate", "fit world.copy_bias (how likely a patch is to keep its code from one frame to the next) by maximum "
-                     "likelihood on training windows, and write the model with it");
+        "calibrate", "fit world.copy_bias and world.copy_bias_run (how likely a patch is to keep its code from one frame "
+                     "to the next, on its own and after a patch that kept its code) by maximum likelihood on training "
+                     "windows, and write the model with them");
     auto flags = std::make_shared<SharedFlags>();
     auto tokens = std::make_shared<std::string>(), weights = std::make_shared<std::string>();
     auto max_windows = std::make_shared<size_t>(256);
@@ -240,14 +242,14 @@ void register_world(CLI::App& app) {
       if (!c.fitted)
         fail("{}: {} of the {} tokens with a previous frame in view were copied from it: the copy bias has no finite "
              "optimum", *tokens, c.copy_rate > 0 ? "all" : "none", c.tokens);
-      const double was = info.config.world.copy_bias;
-      info.config.world.copy_bias = c.bias;
-      model->cfg.copy_bias = c.bias;
+      const double was = info.config.world.copy_bias, was_run = info.config.world.copy_bias_run;
+      info.config.world.copy_bias = model->cfg.copy_bias = c.bias;
+      info.config.world.copy_bias_run = model->cfg.copy_bias_run = c.run;
       if (fs::path(flags->out).has_parent_path()) fs::create_directories(fs::path(flags->out).parent_path());
       world::save_world(model, info, flags->out);
-      std::printf("%s: world.copy_bias %.4f (was %.4f) from %zu windows, %lld tokens: real copy rate %.4f, the model "
-                  "gave it %.4f -> %.4f; cross-entropy %.4f -> %.4f nats\n",
-                  flags->out.c_str(), c.bias, was, windows.size(), (long long)c.tokens, c.copy_rate,
+      std::printf("%s: world.copy_bias %.4f (was %.4f), world.copy_bias_run %.4f (was %.4f) from %zu windows, %lld "
+                  "tokens: real copy rate %.4f, the model gave it %.4f -> %.4f; cross-entropy %.4f -> %.4f nats\n",
+                  flags->out.c_str(), c.bias, was, c.run, was_run, windows.size(), (long long)c.tokens, c.copy_rate,
                   c.predicted_before, c.predicted_after, c.nats_before, c.nats_after);
     });
   }

@@ -30,7 +30,8 @@ def test_argmax_tokens_equal_the_pytorch_peer(shipped, threads):
     strategy, futures, seed, frames, P = "argmax", 1, 0, 3, model.T - 1
     prompt, actions = rollout_torch.prompt_case(model, P, frames, seed=seed)
     peer = rollout_torch.rollout(model, prompt, rollout_torch.normalised(actions), frames, futures, strategy,
-                                 s["top_k"], s["temperature"], s["copy_bias"], seed=seed)
+                                 s["top_k"], s["temperature"], s["copy_bias"], seed=seed,
+                                 copy_bias_run=s["copy_bias_run"])
     ours = rollout_torch.gaia_rollout(world, prompt, actions, frames, futures, strategy, seed)
     assert ours.shape == peer.shape == (futures, P + frames, model.n)
     assert torch.equal(ours[:, :P], prompt.expand(futures, -1, -1))

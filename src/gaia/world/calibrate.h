@@ -20,9 +20,16 @@ namespace gaia::world {
 // Fails if nothing or everything was copied (no finite optimum).
 double fit_copy_bias(const torch::Tensor& log_p_copy, const torch::Tensor& copied);
 
+// The same for two kinds of slot (CopyBias): run [N] bool marks the slots whose slot before kept its code. Each kind
+// is fitted on its own -> {bias of the others, run's bias - that}; where one kind has no finite optimum, one bias
+// for all and run = 0.
+CopyBias fit_copy_biases(const torch::Tensor& log_p_copy, const torch::Tensor& copied, const torch::Tensor& run);
+
 struct CopyCalibration {
   bool fitted = true;                // false where no token or every token was copied: no finite optimum, bias kept
   double bias = 0;                   // fitted world.copy_bias (the model's own where not fitted)
+  double run = 0;                    // fitted world.copy_bias_run: slots after a kept code are fitted on their own
+                                     // (0 where either kind of slot has no finite optimum)
   int64_t tokens = 0;                // image tokens with a previous frame in view, over all windows
   double copy_rate = 0;              // fraction of them equal to the previous frame's code (the data)
   double predicted_before = 0;       // mean probability the model gave that code, with the bias it had
@@ -30,8 +37,10 @@ struct CopyCalibration {
   double nats_before = 0, nats_after = 0;  // mean cross-entropy of those tokens
 };
 
-// Teacher-forced logits of `windows` (conditioning drawn with `mix`, as in training), then fit_copy_bias. The model's
-// own copy_bias is the starting point, so calibrating twice changes nothing. The model is not modified.
+// Teacher-forced logits of `windows` (conditioning drawn with `mix`, as in training), then fit_copy_bias, once for
+// the slots whose slot before kept its code and once for the others (CopyBias). The model's own copy bias is the
+// starting point, so calibrating twice changes nothing. Steps before a window's scored_from are context only. The
+// model is not modified.
 CopyCalibration calibrate_copy_bias(WorldModel& model, const TokenDataset& ds, const std::vector<Window>& windows,
                                     const TextSource& text, const ConditioningMix& mix, int64_t batch,
                                     const std::function<void(int64_t, int64_t)>& progress = {});

@@ -36,6 +36,7 @@ void add_config_fields(WorldConfig& w, std::vector<ConfigField>& f) {
   f.push_back(config_field("world.top_k", &w.top_k, S, closed(1, 1 << 20)));
   f.push_back(config_field("world.temperature", &w.temperature, S, above(0, 100)));
   f.push_back(config_field("world.copy_bias", &w.copy_bias, A, closed(-100, 100)));
+  f.push_back(config_field("world.copy_bias_run", &w.copy_bias_run, A, closed(-100, 100)));
   f.push_back(config_field("world.guide_actions_within_top_k", &w.guide_actions_within_top_k, S));
   f.push_back(config_field("world.guidance_scale", &w.guidance_scale, S, closed(0, 100)));
 }

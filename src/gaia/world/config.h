@@ -27,6 +27,10 @@ struct WorldConfig {
   // small model under-predicts "this patch did not change" (it copies less than real video), and one scalar fitted
   // like temperature scaling (Guo et al. 2017) puts that probability where the data has it.
   double copy_bias = 0.0;
+  // Added to copy_bias where the slot before (i - 1, this frame) kept its code too: unchanged codes come in runs
+  // (static sky, road, a car ahead), and a model briefly trained on a few minutes spreads copies too evenly. Fitted
+  // with copy_bias; 0 = one copy logit for every slot.
+  double copy_bias_run = 0.0;
 
   // Training.
   double dropout = 0.0;

@@ -75,9 +75,10 @@ Score score(WorldModel& model, const TokenDataset& ds, const std::vector<Window>
     }
     auto logits = model->forward(batch.to(dev));                             // [B, T, n, K]
     auto tok = batch.tokens.to(dev);
-    auto nll = token_nll(logits, tok);  // [B, T, n]
+    auto keep = scored_steps(windows, b0, batch.batch(), batch.steps()).to(dev);  // [B, T, 1]
+    auto nll = token_nll(logits, tok) * keep;  // [B, T, n], context steps 0
     sum_pos += nll.sum(std::vector<int64_t>{0, 1}).to(torch::kCPU, torch::kDouble);
-    s.tokens += nll.numel();
+    s.tokens += keep.sum().item<int64_t>() * n;
   }
   if (s.tokens == 0) return s;
   const double per_pos = double(s.tokens) / double(n);
@@ -217,6 +218,45 @@ SteeringSensitivity steering_sensitivity(WorldModel& model, const TokenDataset& 
   s.right = row(c < -threshold);
   s.straight = row(c.abs() <= threshold);  // NaN compares false: left out
   return s;
+}
+
+torch::Tensor scored_steps(const std::vector<Window>& windows, size_t w0, int64_t B, int64_t T, int64_t from) {
+  auto keep = torch::zeros({B, T - from, 1}, torch::kBool);
+  auto k = keep.accessor<bool, 3>();
+  for (int64_t b = 0; b < B; ++b)
+    for (int64_t t = from; t < T; ++t) k[b][t - from][0] = t >= windows.at(w0 + size_t(b)).scored_from;
+  return keep;
+}
+
+std::vector<Window> stream_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
+                                   size_t max_windows) {
+  const int64_t h = std::max<int64_t>(1, T / 2);
+  std::vector<std::vector<Window>> runs;  // each episode's windows in order
+  size_t total = 0;
+  for (size_t e : episodes) {
+    std::vector<Window> run;
+    for (int64_t s = 0; s + T <= ds.steps(e); s += h) run.push_back(Window{e, s, T, s == 0 ? 0 : T - h});
+    total += run.size();
+    if (!run.empty()) runs.push_back(std::move(run));
+  }
+  std::vector<Window> out;
+  if (max_windows == 0 || runs.empty()) return out;
+  if (total <= max_windows) {
+    for (auto& r : runs) out.insert(out.end(), r.begin(), r.end());
+    return out;
+  }
+  // Whole episodes, evenly spaced, each a contiguous run of windows from its middle (its first one scored whole).
+  const size_t E = std::min(runs.size(), max_windows), per = max_windows / E;
+  for (size_t i = 0; i < E; ++i) {
+    const auto& r = runs[i * runs.size() / E];
+    const size_t q = std::min(per, r.size()), j0 = (r.size() - q) / 2;
+    for (size_t j = j0; j < j0 + q; ++j) {
+      Window w = r[j];
+      if (j == j0) w.scored_from = 0;
+      out.push_back(w);
+    }
+  }
+  return out;
 }
 
 std::vector<Window> validation_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,

@@ -150,16 +150,33 @@ torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
   for (int64_t t = 0; t < T; ++t)
     for (int64_t i = 0; i < n; ++i) idx.push_back(layout.predictor(t, i));
   auto sel = torch::tensor(idx, torch::TensorOptions().dtype(torch::kLong)).to(h.device());
-  auto out = logits(h.index_select(1, sel)).view({B, T, n, K});
-  if (cfg.copy_bias == 0 || T < 2) return out;
-  // Frame 0 of a window has no earlier frame in view.
-  auto prev = b.tokens.slice(1, 0, T - 1).to(out.device(), torch::kLong);
-  return torch::cat({out.narrow(1, 0, 1), with_copy_bias(out.slice(1, 1), prev, cfg.copy_bias)}, 1);
+  return CopyBias::of(cfg).apply(logits(h.index_select(1, sel)).view({B, T, n, K}), b.tokens);
 }
 
 torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias) {
   auto idx = prev.to(torch::kLong).unsqueeze(-1);
   return logits.scatter_add(-1, idx, torch::full(idx.sizes(), bias, logits.options()));
+}
+
+torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, const torch::Tensor& bias) {
+  return logits.scatter_add(-1, prev.to(torch::kLong).unsqueeze(-1), bias.to(logits.dtype()).unsqueeze(-1));
+}
+
+torch::Tensor CopyBias::per_slot(const torch::Tensor& cur, const torch::Tensor& prev) const {
+  auto kept = (cur == prev).to(torch::kDouble);                                    // [..., n]
+  auto before = torch::constant_pad_nd(kept.narrow(-1, 0, kept.size(-1) - 1), {1, 0});  // slot i: slot i - 1 kept
+  return before * run + bias;  // bias + run exactly where a run goes on, as at()
+}
+
+torch::Tensor CopyBias::apply(const torch::Tensor& logits, const torch::Tensor& tokens) const {
+  const int64_t T = logits.size(1);
+  if (!any() || T < 2) return logits;
+  // Frame 0 of a window has no earlier frame in view.
+  auto tok = tokens.to(logits.device(), torch::kLong);
+  auto prev = tok.slice(1, 0, T - 1), cur = tok.slice(1, 1);
+  auto later = run == 0 ? with_copy_bias(logits.slice(1, 1), prev, bias)
+                        : with_copy_bias(logits.slice(1, 1), prev, per_slot(cur, prev));
+  return torch::cat({logits.narrow(1, 0, 1), later}, 1);
 }
 
 KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity, c10::optional<torch::ScalarType> dtype) const {

@@ -23,7 +23,7 @@ struct WorldModelImpl : torch::nn::Module {
   WorldModelImpl(const WorldConfig& c, int64_t n, int64_t K);
 
   // Training / scoring: logits of every image token [B, T, n, K], each predicted from everything before it
-  // (plus cfg.copy_bias on the previous frame's code at the same position).
+  // (plus the copy bias, CopyBias below, on the previous frame's code at the same position).
   torch::Tensor forward(const WorldBatch& b);
 
   // ---- pieces for incremental sampling (world/rollout) ----
@@ -63,6 +63,21 @@ TORCH_MODULE(WorldModel);
 
 // world.copy_bias: logits [..., K] with `bias` added at the code each position held one frame earlier, prev [...].
 torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias);
+// ... with one bias per position, bias [...] in the logits' dtype.
+torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, const torch::Tensor& bias);
+
+// The copy logit of image slot i: world.copy_bias, plus world.copy_bias_run where slot i - 1 of the same frame kept
+// its previous frame's code (slot 0 never does). Causal in the raster order, so sampling knows it too.
+struct CopyBias {
+  double bias = 0, run = 0;
+  static CopyBias of(const WorldConfig& c) { return {c.copy_bias, c.copy_bias_run}; }
+  bool any() const { return bias != 0 || run != 0; }
+  double at(bool run_before) const { return run_before ? bias + run : bias; }
+  // Each slot's bias for frames cur [..., n] that follow prev [..., n]: float64 [..., n].
+  torch::Tensor per_slot(const torch::Tensor& cur, const torch::Tensor& prev) const;
+  // logits [B, T, n, K] of frames `tokens` [B, T, n]: frames 1.. biased at their previous frame's codes.
+  torch::Tensor apply(const torch::Tensor& logits, const torch::Tensor& tokens) const;
+};
 
 // Mean cross-entropy over image tokens (paper eq. 1); logits [B, T, n, K], tokens [B, T, n].
 torch::Tensor image_token_loss(const torch::Tensor& logits, const torch::Tensor& tokens);

@@ -229,19 +229,25 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
   const bool fast = fast_ && TokenStep::applies(*model_, B);
   // With the fused step, each token is chosen on raw memory too (token_choice.h): the same tokens up to rounding.
   const bool raw = fast && TokenChoice::applies(o_.sampling);
-  const TokenChoice choose{o_.sampling, model_->cfg.copy_bias, guided_, within};
+  const TokenChoice choose{o_.sampling, guided_, within};
   int64_t* all = raw ? tokens_.data_ptr<int64_t>() : nullptr;  // [B, capacity, n], contiguous (CPU)
   const int64_t cap = tokens_.size(1);
   auto raw_tok = torch::empty({B}, torch::kLong);
   int64_t prev[TokenStep::kMaxRows];
-  const bool biased = k > 0 && model_->cfg.copy_bias != 0;  // as in WorldModelImpl::forward
+  float bias[TokenStep::kMaxRows];
+  const CopyBias copy = CopyBias::of(model_->cfg);
+  const bool biased = k > 0 && copy.any();  // as in WorldModelImpl::forward
   for (int64_t i = 0; i < n; ++i) {
     if (raw) {
       int64_t* t = raw_tok.data_ptr<int64_t>();
       auto lg = next.to(torch::kFloat).contiguous();  // [B, K]
-      for (int64_t b = 0; biased && b < B; ++b) prev[b] = all[(b * cap + k - 1) * n + i];
+      for (int64_t b = 0; biased && b < B; ++b) {
+        const int64_t* now = all + (b * cap + k) * n;
+        prev[b] = now[i - n];
+        bias[b] = float(copy.at(i > 0 && now[i - 1] == now[i - 1 - n]));
+      }
       const double s = guided_ ? o_.guidance.at(int(generated_), int(i), int(n)) : 0.0;
-      choose(lg.data_ptr<float>(), N_, model_->K, biased ? prev : nullptr, s, gen_, t);
+      choose(lg.data_ptr<float>(), N_, model_->K, biased ? prev : nullptr, biased ? bias : nullptr, s, gen_, t);
       for (int64_t b = N_; b < B; ++b) t[b] = t[b - N_];  // both halves continue from the same chosen token
       for (int64_t b = 0; b < B; ++b) all[(b * cap + k) * n + i] = t[b];
       if (progress && ((i + 1) % Lookahead::kChunk == 0 || i + 1 == n)) progress->release(i + 1);
@@ -249,7 +255,14 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       continue;
     }
     auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
-    if (biased) lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), model_->cfg.copy_bias);
+    if (biased && copy.run == 0) {
+      lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), copy.bias);
+    } else if (biased) {
+      auto now = tokens_.select(1, k), before = tokens_.select(1, k - 1);  // [B, n]
+      auto rows = i == 0 ? torch::full({B}, copy.bias, lg.options().dtype(torch::kDouble))  // CopyBias::per_slot at i
+                         : (now.select(1, i - 1) == before.select(1, i - 1)).to(torch::kDouble) * copy.run + copy.bias;
+      lg = with_copy_bias(lg, before.select(1, i), rows);
+    }
     torch::Tensor tok;
     if (guided_) {
       auto c = lg.narrow(0, 0, N_);

@@ -40,22 +40,21 @@ bool TokenChoice::applies(const SamplingOptions& o) {
   return o.strategy == Strategy::Argmax || (o.strategy == Strategy::TopK && o.top_k >= 1 && o.temperature > 0);
 }
 
-void TokenChoice::operator()(const float* logits, int64_t N, int64_t K, const int64_t* prev, double s,
-                             torch::Generator& gen, int64_t* out) const {
+void TokenChoice::operator()(const float* logits, int64_t N, int64_t K, const int64_t* prev, const float* bias,
+                             double s, torch::Generator& gen, int64_t* out) const {
   if (!applies(sampling)) fail("token choice: only argmax and top-k sampling run on raw memory");
   thread_local std::vector<float> cond, guide_row, weights;
   thread_local std::vector<int64_t> ids;
   cond.resize(size_t(K));
-  const float bias = float(copy_bias);
   const float a = float(1.0 + s), b = float(s);  // as guide(): (1 + s) c - s u, each scalar as float
   const int64_t k = std::min<int64_t>(sampling.top_k, K);
   const bool argmax = sampling.strategy == Strategy::Argmax;
   for (int64_t r = 0; r < N; ++r) {
     std::memcpy(cond.data(), logits + r * K, sizeof(float) * size_t(K));
-    if (prev) cond[size_t(prev[r])] += bias;  // with_copy_bias
+    if (prev) cond[size_t(prev[r])] += bias[r];  // with_copy_bias
     const float* u = guided ? logits + (N + r) * K : nullptr;
     auto guided_at = [&](int64_t j) {  // eq. 2 at code j
-      const float uj = prev && j == prev[N + r] ? u[j] + bias : u[j];
+      const float uj = prev && j == prev[N + r] ? u[j] + bias[N + r] : u[j];
       const float cj = a * cond[size_t(j)], sj = b * uj;
       return cj - sj;
     };

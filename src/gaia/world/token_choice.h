@@ -15,13 +15,13 @@ namespace gaia::world {
 struct TokenChoice {
   static bool applies(const SamplingOptions& o);  // argmax, or top-k at a temperature > 0
   SamplingOptions sampling;
-  double copy_bias = 0;
   bool guided = false;  // rows: N conditional, then N unconditional
   bool within = false;  // guided draws among the conditional top k (SamplingOptions::guide_actions_within_top_k)
   // logits [B, K] float32 row-major, B = 2N guided, else N; prev [B]: each row's token at this slot in the
-  // previous frame (nullptr: no copy bias); s: this token's guidance scale. Writes N token ids to `out`.
-  void operator()(const float* logits, int64_t N, int64_t K, const int64_t* prev, double s, torch::Generator& gen,
-                  int64_t* out) const;
+  // previous frame, and bias [B] its copy logit (CopyBias::at; both nullptr: no copy bias); s: this token's guidance
+  // scale. Writes N token ids to `out`.
+  void operator()(const float* logits, int64_t N, int64_t K, const int64_t* prev, const float* bias, double s,
+                  torch::Generator& gen, int64_t* out) const;
 };
 
 }  // namespace gaia::world

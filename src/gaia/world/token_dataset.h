@@ -42,7 +42,10 @@ namespace gaia::world {
 struct Window {
   size_t episode = 0;
   int64_t start = 0, steps = 0;
-  bool operator==(const Window& o) const { return episode == o.episode && start == o.start && steps == o.steps; }
+  int64_t scored_from = 0;  // scoring counts steps from this one on; those before are context (stream_windows)
+  bool operator==(const Window& o) const {
+    return episode == o.episode && start == o.start && steps == o.steps && scored_from == o.scored_from;
+  }
 };
 
 // Paper §4.2: each training example is one of these, so one network gives the conditioned and the unconditioned

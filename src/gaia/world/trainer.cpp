@@ -133,7 +133,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
                      init_info.embeds_text() ? "embeddings of " + init_info.text_encoder : std::string("words")));
   const TextSource text = embeddings ? TextSource::precomputed() : TextSource(ds.has_captions() ? &vocab : nullptr);
   if (!text.any()) note("no captions in the token dataset: text conditioning uses the null text only");
-  auto val_windows = validation_windows(ds, val_eps, T, opt.val_windows);
+  auto val_windows = stream_windows(ds, val_eps, T, opt.val_windows);
   if (val_windows.empty()) note("no validation windows (no held-out episode of T steps): validation skipped");
   // Copy calibration at each validation (opt.calibrate), fitted on the held-out windows in two halves, each half
   // scored with the bias the other half gives: the bias fits frames the weights have not learned (fitted on
@@ -144,7 +144,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     calibration.resize(2);
     for (size_t i = 0; i < val_windows.size(); ++i) calibration[i % 2].push_back(val_windows[i]);
   } else if (opt.calibrate && !val_windows.empty()) {
-    calibration.push_back(validation_windows(ds, train_eps, T, opt.val_windows));
+    calibration.push_back(stream_windows(ds, train_eps, T, opt.val_windows));
   }
 
   torch::manual_seed(cfg.run.seed);
@@ -221,6 +221,7 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
     }
     // Its prediction as the run's model would make it: the same copy logit (a calibrated teacher carries its own).
     teacher->cfg.copy_bias = wc.copy_bias;
+    teacher->cfg.copy_bias_run = wc.copy_bias_run;
     teacher->eval();
     for (auto& p : teacher->parameters()) p.set_requires_grad(false);
     note("distilling text-only and unconditional predictions from " + opt.distill_from.string());
@@ -236,11 +237,15 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
   train::StepLoop loop(main ? opt.out / "metrics.jsonl" : fs::path(), step, total, cfg.run.checkpoint_every,
                        opt.stop_after);
   // The copy bias of the last validation (opt.calibrate), written with every weights file; training runs without it.
-  double fitted_copy_bias = wc.copy_bias;
+  CopyBias fitted = CopyBias::of(wc);
+  auto set_copy_bias = [&](const CopyBias& c) {
+    model->cfg.copy_bias = info.config.world.copy_bias = c.bias;
+    model->cfg.copy_bias_run = info.config.world.copy_bias_run = c.run;
+  };
   auto save_calibrated = [&](const fs::path& path) {
-    model->cfg.copy_bias = info.config.world.copy_bias = fitted_copy_bias;
+    set_copy_bias(fitted);
     save_world(model, info, path);
-    model->cfg.copy_bias = info.config.world.copy_bias = wc.copy_bias;
+    set_copy_bias(CopyBias::of(wc));
   };
   auto save = [&]() {
     auto& state = optim.gathered();  // every rank: a sharded state comes together on rank 0
@@ -294,19 +299,23 @@ WorldTrainResult train_world(const Config& config, const WorldTrainOptions& opt,
       }
       ScoreOptions so;
       so.batch = wc.batch_size;
-      double nats = 0, bias = 0;
+      double nats = 0, bias = 0, run = 0;
       int64_t tokens = 0, fitted_on = 0;
       for (size_t h = 0; h < fits.size(); ++h) {
-        model->cfg.copy_bias = fits[fits.size() - 1 - h].bias;  // the other half's (one set: its own)
+        const auto& other = fits[fits.size() - 1 - h];  // the other half's (one set: its own)
+        model->cfg.copy_bias = other.bias, model->cfg.copy_bias_run = other.run;
         const auto s = score(model, ds, fits.size() == 2 ? calibration[h] : val_windows, text, so);
         nats += s.nats * double(s.tokens), tokens += s.tokens;
-        bias += fits[h].bias * double(fits[h].tokens), fitted_on += fits[h].tokens;
+        bias += fits[h].bias * double(fits[h].tokens), run += fits[h].run * double(fits[h].tokens);
+        fitted_on += fits[h].tokens;
       }
-      fitted_copy_bias = bias / double(std::max<int64_t>(fitted_on, 1));  // what the weights carry
+      const double on = double(std::max<int64_t>(fitted_on, 1));
+      fitted = {bias / on, run / on};  // what the weights carry
       v["bits_per_token_uncalibrated"] = v["bits_per_token"];
       v["bits_per_token"] = nats / double(std::max<int64_t>(tokens, 1)) / std::log(2.0);
-      v["copy_bias"] = fitted_copy_bias;
-      model->cfg.copy_bias = wc.copy_bias;
+      v["copy_bias"] = fitted.bias;
+      v["copy_bias_run"] = fitted.run;
+      model->cfg.copy_bias = wc.copy_bias, model->cfg.copy_bias_run = wc.copy_bias_run;
     }
     model->train();
     return v;

@@ -18,11 +18,14 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
   if (ids.empty()) ids = ds.ids();  // e.g. a bare .npy: score everything (say so)
   auto eps = with_footage(ds, ds.indices(ids), o.footage);
   auto windows = validation_windows(ds, eps, info.config.world.context_steps, o.max_windows);
+  // Bits per token over the held-out frames read as a stream, each frame once with the frames before it in view (as
+  // the compressors read them); the per-frame measures below keep non-overlapping windows.
+  auto stream = stream_windows(ds, eps, info.config.world.context_steps, o.max_windows);
   const std::string kind = o.footage == Footage::kAny ? "" : to_string(o.footage) + " ";
   if (windows.empty()) fail("{}: no held-out {}window of {} steps to score", o.name, kind, info.config.world.context_steps);
   const TextSource text = text_source(info, ds);
   nlohmann::json j = {{"tokens", o.name}, {"world", o.weights}, {"footage", to_string(o.footage)},
-                      {"episodes", eps.size()}, {"windows", windows.size()}};
+                      {"episodes", eps.size()}, {"windows", windows.size()}, {"stream_windows", stream.size()}};
   std::vector<int> ks = o.top_k_sweep.empty() ? std::vector<int>{1, info.config.world.top_k, 0} : o.top_k_sweep;
   for (int k : ks)
     if (k < 0 || k > info.K) fail("--top-k-sweep: k must be in [0, {}] (0 = the whole distribution), got {}", info.K, k);
@@ -37,7 +40,7 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
     so.mode = mode;
     so.shuffle = shuffle;
     so.batch = info.config.world.batch_size;
-    auto s = score(model, ds, windows, text, so);
+    auto s = score(model, ds, stream, text, so);
     step();
     return s;
   };
@@ -46,15 +49,15 @@ nlohmann::json evaluate_world(WorldModel& model, const WorldInfo& info, const To
   auto txt = run_score(Conditioning::kText, false);
   auto txt_shuf = run_score(Conditioning::kText, true);
   auto unc = run_score(Conditioning::kUnconditional, false);
-  // The same held-out token stream (the scored windows, in order) through general-purpose compressors.
-  std::vector<int16_t> stream;
-  for (auto& w : windows) {
+  // The same held-out frames (those scored, in order) through general-purpose compressors.
+  std::vector<int16_t> frames;
+  for (auto& w : stream) {
     auto ep = ds.episode(w.episode);
     const int64_t n = ds.tokens_per_step();
-    for (int64_t t = w.start; t < w.start + w.steps; ++t)
-      for (int64_t i = 0; i < n; ++i) stream.push_back(static_cast<int16_t>(ep->tokens[size_t(t * n + i)]));
+    for (int64_t t = w.start + w.scored_from; t < w.start + w.steps; ++t)
+      for (int64_t i = 0; i < n; ++i) frames.push_back(static_cast<int16_t>(ep->tokens[size_t(t * n + i)]));
   }
-  auto xz = eval::xz_size(stream), zs = eval::zstd_size(stream);
+  auto xz = eval::xz_size(frames), zs = eval::zstd_size(frames);
   const double floor = std::min(xz.bits_per_token, zs.bits_per_token);
   j["cross_entropy_nats"] = {{"action", act.nats}, {"text", txt.nats}, {"uncond", unc.nats},
                              {"action_shuffled", act_shuf.nats}, {"text_shuffled", txt_shuf.nats}};
