@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "gaia/torch/attention.h"
+#include "gaia/torch/causal_softmax.h"
 #include "test_util.h"
 
 using namespace gaia;
@@ -47,4 +48,45 @@ TEST(Attention, CausalMaskSeesOnlyEarlierKeys) {
   EXPECT_TRUE(torch::equal(causal_mask(2, 6, 4, q.options()), m.slice(0, 4)));
   EXPECT_NE(test::error_of([&] { attention(q.slice(1, 0, 2), k, v, {}, true); }).find("as many queries as keys"),
             std::string::npos);
+}
+
+// The causal softmax kernel (torch/causal_softmax.h) against LibTorch's masked softmax, forward and backward, in
+// float32 and bf16, on rows of every length from 1 to L (L not a multiple of eight): zeros after each query's keys,
+// float32 to within rounding, bf16 to within its own rounding of the same float32 values.
+TEST(Attention, CausalSoftmaxMatchesTheMaskedSoftmaxBothWays) {
+  torch::manual_seed(5);
+  const int64_t N = 3, L = 21;
+  const double scale = 0.3;
+  auto s = torch::randn({N, L, L}) * 4;
+  auto g = torch::randn({N, L, L});
+  const auto mask = causal_mask(L, L, 0, s.options());
+  auto want_p = [&](const torch::Tensor& x) {
+    auto xr = x.detach().to(torch::kFloat).clone().requires_grad_(true);
+    auto p = torch::softmax(xr * scale + mask, -1);
+    auto dx = torch::autograd::grad({p}, {xr}, {g})[0];
+    return std::make_pair(p.detach(), dx);
+  };
+  for (auto dtype : {torch::kFloat, torch::kBFloat16}) {
+    SCOPED_TRACE(dtype == torch::kFloat ? "float32" : "bf16");
+    auto x = s.to(dtype).clone().requires_grad_(true);
+    auto p = causal_softmax(x, scale);
+    EXPECT_EQ(p.scalar_type(), dtype);
+    auto dx = torch::autograd::grad({p}, {x}, {g.to(dtype)})[0];
+    auto [ref_p, ref_g] = want_p(x);  // from the same (rounded) scores
+    const double tol = dtype == torch::kFloat ? 1e-6 : 8e-3;
+    EXPECT_LT((p.to(torch::kFloat) - ref_p).abs().max().item<double>(), tol);
+    EXPECT_TRUE(torch::equal(p.to(torch::kFloat).triu(1), torch::zeros({N, L, L})));
+    // Each row sums to one over the keys its query sees.
+    EXPECT_LT((p.to(torch::kFloat).sum(-1) - 1).abs().max().item<double>(), dtype == torch::kFloat ? 1e-5 : 2e-2);
+    auto got_g = dx.to(torch::kFloat);
+    const double gtol = dtype == torch::kFloat ? 1e-6 : 2e-2 * ref_g.abs().max().item<double>();
+    EXPECT_LT((got_g - ref_g).abs().max().item<double>(), gtol);
+    EXPECT_TRUE(torch::equal(got_g.triu(1), torch::zeros({N, L, L})));
+  }
+  EXPECT_NE(test::error_of([&] { causal_softmax(torch::randn({2, 3, 4}), 1.0); }).find("square"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { causal_softmax(torch::randn({2, 3, 3}), 0.0); }).find("scale"), std::string::npos);
+  // attention() on the CPU takes this path for a causal square, float32 and under bf16 autocast.
+  auto q = torch::randn({2, 3, 9, 8}), k = torch::randn({2, 3, 9, 8}), v = torch::randn({2, 3, 9, 8});
+  auto m = causal_mask(9, 9, 0, q.options());
+  EXPECT_TRUE(torch::allclose(attention(q, k, v, {}, true), reference(q, k, v, m), 1e-5, 1e-6));
 }

@@ -241,15 +241,15 @@ TrainMemory world_train_memory(const Config& c, const TrainMemorySettings& m) {
   t.buckets = m.ranks > 1 ? f * N / share : 0;                  // the flat all-reduce buffers (train/grad_reducer.h)
   // Saved for the backward pass per layer (world/transformer.cpp): the float32 residual stream at both norms, the
   // two norms' outputs, q, k, v, the heads' output, the MLP's hidden layer before and after the GELU:
-  // s B d (2 f + 14 e); and the attention probabilities, H s^2 B in float32 (and again in e bytes under autocast),
-  // which fused attention replaces by one float per query and head.
+  // s B d (2 f + 14 e); and the attention probabilities, H s^2 B in e bytes (the CPU's causal softmax keeps them in
+  // the scores' dtype, torch/causal_softmax.h), which fused attention replaces by one float per query and head.
   const double per_layer_states = s * B * d * (2 * f + 14 * e);
-  const double scores = m.fused_attention ? H * s * B * f : H * s * s * B * (f + (e < f ? e : 0));
+  const double scores = m.fused_attention ? H * s * B * f : H * s * s * B * e;
   const double layer = per_layer_states + scores;
   // Checkpointing keeps each layer's input and recomputes one layer at a time. Unfused attention's backward pass
-  // holds three more float32 tensors of the probabilities' size at once (their gradient, the scores' gradient and
-  // the softmax backward's product) while every earlier layer's activations are still kept.
-  const double transient = m.fused_attention ? 0 : 3 * H * s * s * B * f;
+  // holds two more tensors of the probabilities' size at once (their gradient and the scores') while every earlier
+  // layer's activations are still kept.
+  const double transient = m.fused_attention ? 0 : 2 * H * s * s * B * e;
   t.activations = (m.checkpointing ? L * s * B * d * f + layer : L * layer) + 3 * s * B * d * f + transient;
   // The image tokens' distribution over K codes: the logits (e), their float32 log-softmax, and in the backward pass
   // the gradients of both.

@@ -7,6 +7,7 @@
 #include <torch/version.h>
 
 #include "gaia/core/error.h"
+#include "gaia/torch/causal_softmax.h"
 
 namespace gaia {
 
@@ -25,14 +26,19 @@ torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const to
   if (!causal) return at::scaled_dot_product_attention(q, k, v, bias, 0.0, false);
 #endif
   const double scale = 1.0 / std::sqrt(double(hd));
-  torch::Tensor mask = bias;
-  if (causal) mask = mask.defined() ? mask + causal_mask(Lq, Lk, 0, q.options()) : causal_mask(Lq, Lk, 0, q.options());
-  // Batched 3-D products over the leading dimensions.
   std::vector<int64_t> lead(q.sizes().begin(), q.sizes().end() - 2);
   int64_t n = 1;
   for (auto s : lead) n *= s;
+  auto out = lead;
+  out.insert(out.end(), {Lq, v.size(-1)});
   auto q3 = q.reshape({n, Lq, hd}), kt = k.transpose(-2, -1).reshape({n, hd, Lk}), v3 = v.reshape({n, Lk, v.size(-1)});
-  torch::Tensor att;  // [n, Lq, Lk]
+  if (causal && !bias.defined() && q.device().is_cpu()) {
+    auto s = torch::bmm(q3, kt);  // [n, L, L], the scale applied as the softmax reads them
+    if (causal_softmax_applies(s)) return torch::bmm(causal_softmax(s, scale).to(v3.scalar_type()), v3).view(out);
+  }
+  torch::Tensor mask = bias;
+  if (causal) mask = mask.defined() ? mask + causal_mask(Lq, Lk, 0, q.options()) : causal_mask(Lq, Lk, 0, q.options());
+  torch::Tensor att;  // [n, Lq, Lk], batched 3-D products over the leading dimensions
   if (mask.defined() && mask.dim() == 2) {
     att = torch::baddbmm(mask, q3, kt, /*beta=*/1.0, /*alpha=*/scale);  // the mask fused into the product
   } else if (mask.defined()) {
@@ -42,8 +48,6 @@ torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const to
   } else {
     att = torch::bmm(q3, kt) * scale;
   }
-  auto out = lead;
-  out.insert(out.end(), {Lq, v.size(-1)});
   // Softmax statistics in float32 under bf16 / fp16 autocast (a no-op in float32).
   return torch::bmm(torch::softmax(att, -1, torch::kFloat).to(v3.scalar_type()), v3).view(out);
 }
