@@ -85,8 +85,14 @@ TEST(Attention, CausalSoftmaxMatchesTheMaskedSoftmaxBothWays) {
   }
   EXPECT_NE(test::error_of([&] { causal_softmax(torch::randn({2, 3, 4}), 1.0); }).find("square"), std::string::npos);
   EXPECT_NE(test::error_of([&] { causal_softmax(torch::randn({2, 3, 3}), 0.0); }).find("scale"), std::string::npos);
-  // attention() on the CPU takes this path for a causal square, float32 and under bf16 autocast.
-  auto q = torch::randn({2, 3, 9, 8}), k = torch::randn({2, 3, 9, 8}), v = torch::randn({2, 3, 9, 8});
+  // attention() takes this path for a causal square being trained on the CPU: the same values and gradients as
+  // the formula's.
+  auto q = torch::randn({2, 3, 9, 8}).requires_grad_(true), k = torch::randn({2, 3, 9, 8}), v = torch::randn({2, 3, 9, 8});
   auto m = causal_mask(9, 9, 0, q.options());
-  EXPECT_TRUE(torch::allclose(attention(q, k, v, {}, true), reference(q, k, v, m), 1e-5, 1e-6));
+  auto y = attention(q, k, v, {}, true), y_ref = reference(q, k, v, m);
+  EXPECT_TRUE(torch::allclose(y, y_ref, 1e-5, 1e-6));
+  auto gy = torch::randn({2, 3, 9, 8});
+  auto dq = torch::autograd::grad({y}, {q}, {gy})[0];
+  auto dq_ref = torch::autograd::grad({y_ref}, {q}, {gy})[0];
+  EXPECT_TRUE(torch::allclose(dq, dq_ref, 1e-4, 1e-5));
 }

@@ -32,7 +32,10 @@ torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const to
   auto out = lead;
   out.insert(out.end(), {Lq, v.size(-1)});
   auto q3 = q.reshape({n, Lq, hd}), kt = k.transpose(-2, -1).reshape({n, hd, Lk}), v3 = v.reshape({n, Lk, v.size(-1)});
-  if (causal && !bias.defined() && q.device().is_cpu()) {
+  // Training (a gradient wanted) on the CPU: the causal softmax kernel. Inference keeps one path for every causal
+  // attention, whole or block by block, so a rollout's tokens do not depend on how its cache was filled.
+  const bool grad = torch::GradMode::is_enabled() && (q.requires_grad() || k.requires_grad() || v.requires_grad());
+  if (causal && !bias.defined() && q.device().is_cpu() && grad) {
     auto s = torch::bmm(q3, kt);  // [n, L, L], the scale applied as the softmax reads them
     if (causal_softmax_applies(s)) return torch::bmm(causal_softmax(s, scale).to(v3.scalar_type()), v3).view(out);
   }

@@ -1,9 +1,9 @@
 #pragma once
 // Scaled dot-product attention (Vaswani et al. 2017), the one implementation every model calls: the world model's
 // causal self-attention (§2.1), the video decoder's spatial and temporal attention (§2.4) and the DINO teacher's
-// ViT blocks. On LibTorch 2 it is the fused kernel; on 1.x a causal square on the CPU goes through causal_softmax.h
-// (one pass over the lower triangle each way), and an additive mask is fused into the score product (baddbmm: one
-// pass over the L x L scores instead of three).
+// ViT blocks. On LibTorch 2 it is the fused kernel; on 1.x a causal square being trained on the CPU goes through
+// causal_softmax.h (one pass over the lower triangle each way), and an additive mask is fused into the score product
+// (baddbmm: one pass over the L x L scores instead of three).
 #include <torch/torch.h>
 
 namespace gaia {

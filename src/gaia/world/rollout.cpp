@@ -319,9 +319,7 @@ bool RolloutStepper::Lookahead::Progress::done() {
 
 RolloutStepper::Lookahead::Lookahead(const Lookahead& o) : job(o.job), first(o.first) {
   if (job.valid()) job.get();  // the job's error, if any, is the copy's too
-  cache = o.cache;
-  for (auto& t : cache.k) t = t.clone();
-  for (auto& t : cache.v) t = t.clone();
+  cache = o.cache;  // the same tensors, as the stepper's own cache_: fork() and rows() give the copy its own
   job = {};
   if (o.job.valid()) {  // a finished job that the copy takes as its own
     std::promise<void> done;
@@ -336,16 +334,17 @@ RolloutStepper::Lookahead& RolloutStepper::Lookahead::operator=(const Lookahead&
 }
 
 RolloutStepper RolloutStepper::fork() const {
-  RolloutStepper c(*this);
+  RolloutStepper c(*this);  // waits for a lookahead job
   c.tokens_ = tokens_.clone();
-  for (auto& t : c.cache_.k) t = t.clone();
-  for (auto& t : c.cache_.v) t = t.clone();
+  for (KVCache* cache : {&c.cache_, &c.ahead_.cache})
+    for (auto* layers : {&cache->k, &cache->v})
+      for (auto& t : *layers) t = t.clone();
   c.gen_ = gen_.clone();
   return c;
 }
 
 RolloutStepper RolloutStepper::rows(const std::vector<int64_t>& futures) const {
-  RolloutStepper c(*this);  // waits for a lookahead job; the copies below own their tensors
+  RolloutStepper c(*this);  // waits for a lookahead job; the selections below are its own tensors, copied once
   const int64_t N = int64_t(futures.size());
   std::vector<int64_t> idx(futures);
   if (guided_)  // [cond x N | uncond x N]

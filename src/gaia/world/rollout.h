@@ -100,8 +100,8 @@ class RolloutStepper {
   RolloutStepper rows(const std::vector<int64_t>& futures) const;  // repeat() and select(): these futures' rows  // sampling's per-token path where it applies (shared by forks)
   // §2.3's one-step slide re-encodes the T - 1 kept steps after every frame, but T - 2 of them are known a frame
   // ahead and the newest comes token by token: where the fused token step runs at one intra-op thread, a second
-  // thread encodes the next window while the frame samples. A copy of the stepper waits for the job and gets its
-  // own cache.
+  // thread encodes the next window while the frame samples. A copy of the stepper waits for the job; fork() and
+  // rows() give it a cache of its own.
   struct Lookahead {
     static constexpr int64_t kChunk = 48;  // image tokens of the newest step encoded at once
     // How many of the newest step's tokens are out: the job waits for each chunk.
