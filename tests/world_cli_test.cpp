@@ -450,8 +450,9 @@ TEST(WorldCli, ValidationCalibratesTheCopyBiasItWrites) {
   const auto b = nlohmann::json::parse(read_file(p.dir / "cal-eval-bf16" / "eval.json"));
   EXPECT_EQ(b["precision"], cpu_has_bf16() ? "bf16" : "fp32");
   EXPECT_NEAR(b["bits_per_token"]["world_model"].get<double>(), e["bits_per_token"]["world_model"].get<double>(), 0.05);
-  if (cpu_has_bf16())
+  if (cpu_has_bf16()) {
     EXPECT_NE(b["bits_per_token"]["world_model"].get<double>(), e["bits_per_token"]["world_model"].get<double>());
+  }
   r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --steps 4 --val-every 4 --no-calibrate --out " +
                      q(p.dir / "uncal-run"));
   ASSERT_EQ(r.status, 0) << r.output;

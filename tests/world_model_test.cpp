@@ -566,7 +566,9 @@ TEST(WorldRollout, RawTokenChoiceGivesTheLibTorchPathsTokens) {
     auto raw = rollout(m, q, o).tokens;
     m->cfg.copy_bias = m->cfg.copy_bias_run = 0;
     EXPECT_TRUE(torch::equal(general, raw));
-    if (setting > 0) EXPECT_GT(std::get<0>(at::_unique(raw.narrow(1, P, F))).numel(), 8);  // it does sample
+    if (setting > 0) {
+      EXPECT_GT(std::get<0>(at::_unique(raw.narrow(1, P, F))).numel(), 8);  // it does sample
+    }
   }
   at::set_num_threads(threads);
 }

@@ -26,12 +26,11 @@ using Shorts8 = uint16_t __attribute__((vector_size(16)));
 [[gnu::always_inline]] inline Floats8 load8(const uint16_t* p) {
   Shorts8 s;
   std::memcpy(&s, p, sizeof s);
-  const Ints8 w = __builtin_convertvector(s, Ints8) << 16;
-  return reinterpret_cast<const Floats8&>(w);
+  return (Floats8)(__builtin_convertvector(s, Ints8) << 16);  // vector casts keep the bits
 }
 [[gnu::always_inline]] inline void store8(float* p, Floats8 v) { std::memcpy(p, &v, sizeof v); }
 [[gnu::always_inline]] inline void store8(uint16_t* p, Floats8 v) {
-  const Ints8 u = reinterpret_cast<const Ints8&>(v);
+  const Ints8 u = (Ints8)v;
   Ints8 r = (u + 0x7FFF + ((u >> 16) & 1)) >> 16;
   r = v != v ? Ints8{} + 0x7FC0 : r;  // NaN stays NaN
   const Shorts8 s = __builtin_convertvector(r, Shorts8);

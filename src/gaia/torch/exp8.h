@@ -14,7 +14,7 @@ using Ints8 = int32_t __attribute__((vector_size(32)));
   x = x < lo ? lo : x;
   const Floats8 t = x * 1.44269504088896341f + 12582912.0f;  // + 1.5 * 2^23: n = round(x / ln2) in the low bits
   const Floats8 n = t - 12582912.0f;
-  const Ints8 ni = reinterpret_cast<const Ints8&>(t) - 0x4B400000;
+  const Ints8 ni = (Ints8)t - 0x4B400000;  // a vector cast: the same bits
   const Floats8 r = (x - n * 0.693359375f) - n * -2.12194440e-4f;
   Floats8 p = r * 1.9875691500e-4f + 1.3981999507e-3f;
   p = p * r + 8.3334519073e-3f;
@@ -23,7 +23,7 @@ using Ints8 = int32_t __attribute__((vector_size(32)));
   p = p * r + 5.0000001201e-1f;
   const Floats8 y = p * r * r + r + 1.0f;
   const Ints8 e = (ni + 127) << 23;
-  return y * reinterpret_cast<const Floats8&>(e);
+  return y * (Floats8)e;
 }
 
 }  // namespace gaia
