@@ -76,9 +76,9 @@ SteeringSensitivity steering_sensitivity(WorldModel& model, const TokenDataset& 
 torch::Tensor scored_steps(const std::vector<Window>& windows, size_t w0, int64_t B, int64_t T, int64_t from = 0);
 
 // Windows that score each frame of the given episodes once, as a compressor reads a stream: the first window of an
-// episode scores all its T steps, each later one starts T/2 steps on and scores its last T/2, so each frame after it has at
-// least T/2 frames before it in view where non-overlapping windows give frame 0 of each none. At most
-// `max_windows`: then whole episodes, evenly spaced, each a contiguous run of windows from its middle, so that a
+// episode scores all its T steps, each later one starts T/2 steps on and scores its last T/2, so each frame after
+// the first window has at least T/2 frames before it in view (non-overlapping windows give frame 0 of each none). At
+// most `max_windows`: then whole episodes, evenly spaced, each a contiguous run of windows from its middle, so that a
 // compressor given the same frames in order sees what the model sees.
 std::vector<Window> stream_windows(const TokenDataset& ds, const std::vector<size_t>& episodes, int64_t T,
                                    size_t max_windows);
