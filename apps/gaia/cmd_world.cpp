@@ -126,8 +126,9 @@ void register_world(CLI::App& app) {
             if (l.validation && !l.val.empty()) {
               info += fmt::format(" | val {:.3f} bits/token", l.val.value("bits_per_token", 0.0));
               if (l.val.contains("copy_bias"))  // calibrated in the recipe: the bias and what it gained
-                info += fmt::format(" (copy bias {:.2f}{:+.2f} in runs; {:.3f} without)", l.val["copy_bias"].get<double>(),
-                                    l.val.value("copy_bias_run", 0.0), l.val["bits_per_token_uncalibrated"].get<double>());
+                info += fmt::format(" (copy bias {:.2f}{:+.2f} in runs; {:.3f} without)",
+                                    l.val["copy_bias"].get<double>(), l.val.value("copy_bias_run", 0.0),
+                                    l.val["bits_per_token_uncalibrated"].get<double>());
             }
             bar->update(l.step, info);
           },

@@ -36,7 +36,8 @@ double fit_copy_bias(const torch::Tensor& log_p_copy, const torch::Tensor& copie
 CopyBias fit_copy_biases(const torch::Tensor& log_p_copy, const torch::Tensor& copied, const torch::Tensor& run) {
   auto a = log_p_copy.to(torch::kDouble).flatten(), y = copied.to(torch::kDouble).flatten();
   auto r = run.to(torch::kBool).flatten();
-  if (r.numel() != y.numel()) fail("fit_copy_biases: need a run flag for every outcome (got {} and {})", r.numel(), y.numel());
+  if (r.numel() != y.numel())
+    fail("fit_copy_biases: need a run flag for every outcome (got {} and {})", r.numel(), y.numel());
   auto fit_where = [&](const torch::Tensor& m) -> std::optional<double> {
     auto ym = y.masked_select(m);
     const double k = ym.sum().item<double>();
