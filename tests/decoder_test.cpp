@@ -219,6 +219,57 @@ TEST(DecoderUNet, ShapesAndParameterCountMatchThePlan) {
   EXPECT_EQ(v.abs().max().item<float>(), 0.0f);
 }
 
+// The plan's FLOPs of a U-Net pass (sizing::inference_flops) against a count read off the built model: every
+// weight's multiply-adds at the pixels of its level, and the attention products where the modules sit.
+TEST(DecoderUNet, PassFlopsMatchThePlan) {
+  for (auto c : {test::config("tiny.yaml"), Config()}) {
+    VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+    const double T = c.decoder.frames;
+    auto pixels = [&](int level) { return double(c.data.height >> level) * double(c.data.width >> level); };
+    auto index = [](const std::string& name, const std::string& prefix) {
+      return std::stoi(name.substr(prefix.size(), name.find('.', prefix.size()) - prefix.size()));
+    };
+    const int L = int(c.decoder.channel_mult.size());
+    double macs = 0;
+    for (const auto& p : m->named_parameters()) {
+      const std::string& name = p.key();
+      const auto& w = p.value();
+      // Matrices and kernels only: embeddings are looked up, the temporal position bias is added.
+      if (w.dim() < 2 || name.rfind("token_embedding", 0) == 0 || name.rfind("rate_embedding", 0) == 0 ||
+          name.find("rel_bias") != std::string::npos)
+        continue;
+      int level = 0;
+      if (name.rfind("down.", 0) == 0) level = m->down_level.at(size_t(index(name, "down.")));
+      else if (name.rfind("up.", 0) == 0) level = m->up_level.at(size_t(index(name, "up.")));
+      else if (name.rfind("mid", 0) == 0) level = L - 1;
+      else if (name.rfind("token_proj.", 0) == 0) level = index(name, "token_proj.");
+      else if (name.rfind("downsamplers.", 0) == 0) level = index(name, "downsamplers.") + 1;
+      else if (name.rfind("upsamplers.", 0) == 0) level = L - 2 - index(name, "upsamplers.");
+      const bool per_frame = name.find("film") != std::string::npos || name.rfind("time_fc", 0) == 0;
+      const double outputs = per_frame ? T : T * pixels(level);
+      macs += double(w.numel()) * outputs;
+      const double px = pixels(level), ch = double(w.size(1));  // qkv: [3c, c]
+      if (name.find("spatial.qkv.weight") != std::string::npos) macs += T * 2 * px * px * ch;
+      if (name.find("temporal.qkv.weight") != std::string::npos) macs += px * 2 * T * T * ch;
+    }
+    EXPECT_NEAR(sizing::inference_flops(c, 1).decoder_window / (2 * macs), 1.0, 1e-9) << c.name;
+  }
+}
+
+// A second of video in the plan against the schedule's own windows over a long drive (backward windows, then
+// two doublings): the same number of U-Net passes, up to the shorter last windows.
+TEST(DecoderUNet, VideoSecondFlopsFollowTheSchedule) {
+  Config c;
+  const int T = c.decoder.frames;
+  const int64_t N = 401;  // token frames: 64 s at 6.25 Hz
+  const double tokens_windows = double(backward_windows(N, T).size());
+  const double up_windows = double(upsample_windows(2 * N - 1, T).size() + upsample_windows(4 * N - 3, T).size());
+  const double passes = c.decoder.ddim_steps * ((1 + c.decoder.mix_probability) * tokens_windows + up_windows);
+  const double seconds = double(4 * N - 3) / (4 * c.data.world_fps);
+  const auto f = sizing::inference_flops(c, 1);
+  EXPECT_NEAR(f.decoder_video_second / (passes * f.decoder_window / seconds), 1.0, 0.01);
+}
+
 TEST(DecoderUNet, TemporalSwitchMakesFramesIndependent) {
   Config c = test::config("tiny.yaml");
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);

@@ -287,6 +287,30 @@ TEST(WorldModel, ParameterCountEqualsThePlan) {
   }
 }
 
+// The plan's inference FLOPs against the built model: a token's multiply-adds are its blocks' matrices (read off
+// the weights) and the head, plus attention's two products over the keys before it; the re-encoding of the
+// one-step slide is every kept position through all blocks but the last, which only stores keys and values.
+TEST(WorldModel, InferenceFlopsMatchThePlan) {
+  for (auto name : {"tiny.yaml", "default.yaml"}) {
+    Config c = test::config(name);
+    WorldModel m(c.world, c.image_tokens(), c.tokenizer.codebook_size);
+    double block = 0, kv = 0;  // multiply-adds of one block's matrices, and of its key and value projections
+    for (const auto& p : (*m->blocks)[0]->named_parameters())
+      if (p.value().dim() == 2) block += double(p.value().numel());
+    kv = 2.0 / 3.0 * double((*m->blocks)[0]->named_parameters()["attn.qkv.weight"].numel());
+    const auto& L = m->layout;
+    const double layers = double(m->blocks->size()), d = double(m->d), head = double(m->head->weight.numel());
+    double token = 0;
+    for (int64_t i = 0; i < L.n; ++i) token += layers * (block + 2 * d * double((L.T - 1) * L.per_step() + L.m + i + 1)) + head;
+    const auto f = sizing::inference_flops(c, 2);
+    EXPECT_NEAR(f.world_token / (2 * token / double(L.n)), 1.0, 1e-9) << name;
+    double reencode = 0;
+    for (int64_t q = 0; q < (L.T - 1) * L.per_step(); ++q) reencode += (layers - 1) * (block + 2 * d * double(q + 1)) + kv;
+    EXPECT_NEAR(f.world_frame_reencode / (2 * 2 * reencode), 1.0, 1e-9) << name;
+    EXPECT_GT(f.world_frame_sampling, 2 * L.n * f.world_token) << name;  // the text and actions on top of the tokens
+  }
+}
+
 // world.action_mlp: the plan counts its parameters, a new MLP starts where the linear layers were (fine-tuning a
 // linear-action model changes nothing until it trains), and once trained the embedding is no longer affine in the
 // action, which is what it is for.

@@ -43,6 +43,7 @@ void register_plan(CLI::App& app) {
     // This build's attention: fused where LibTorch has scaled_dot_product_attention (torch/attention.cpp).
     const auto ms = sizing::train_memory_settings(c, *ranks, *accumulate, *shard, TORCH_VERSION_MAJOR >= 2, *shard_grads);
     const auto mem = sizing::world_train_memory(c, ms);
+    const auto flops = sizing::inference_flops(c, 2);
     if (*json) {
       nlohmann::json j = {{"config", c.name},
                           {"tokenizer_params", p.tokenizer.total},
@@ -55,6 +56,12 @@ void register_plan(CLI::App& app) {
                           {"bit_compression", p.bit_compression},
                           {"world_flops_per_token", p.world_flops_per_token},
                           {"world_flops_per_token_with_attn", p.world_flops_per_token_with_attn},
+                          {"inference_flops",
+                           {{"world_token", flops.world_token},
+                            {"world_frame_sampling_guided", flops.world_frame_sampling},
+                            {"world_frame_reencode_guided", flops.world_frame_reencode},
+                            {"decoder_window", flops.decoder_window},
+                            {"decoder_video_second", flops.decoder_video_second}}},
                           {"world_train_memory",
                            {{"micro_batch", ms.micro_batch},
                             {"ranks", ms.ranks},

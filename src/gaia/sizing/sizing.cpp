@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "gaia/core/error.h"
+#include "gaia/decoder/tasks.h"
 #include "gaia/eval/metrics.h"
 
 namespace gaia::sizing {
@@ -178,7 +179,92 @@ Plan make_plan(const Config& c) {
   return p;
 }
 
+InferenceFlops inference_flops(const Config& c, int rows) {
+  InferenceFlops f;
+  const auto& w = c.world;
+  const double d = w.d_model, K = c.tokenizer.codebook_size, layers = w.n_layers;
+  const double m = w.text_tokens, n = c.image_tokens(), l = w.action_tokens, S = m + n + l, T = w.context_steps;
+  // A block: qkv 3d^2, proj d^2, MLP 8d^2 multiply-adds a token; attention 2 d a key (scores and values, all heads).
+  const double block = 12 * d * d, kv = 2 * d * d;
+  auto attend = [&](double keys) { return 2 * d * keys; };
+  // Sampling in a full window: the current step sits at T - 1, its token i after (T - 1) S + m + i earlier ones.
+  double tokens = 0;
+  for (int64_t i = 0; i < int64_t(n); ++i) tokens += layers * (block + attend((T - 1) * S + m + i + 1)) + d * K;
+  f.world_token = 2 * tokens / n;
+  // The step's text through every block (the last position's logits predict token 0), its actions appended to
+  // the cache (the last block's keys and values only, as WorldModel::prefill).
+  double text = 0;
+  for (int64_t i = 0; i < int64_t(m); ++i) text += layers * (block + attend((T - 1) * S + i + 1));
+  const double actions = l * ((layers - 1) * block + kv) + (layers - 1) * l * attend(T * S);
+  f.world_frame_sampling = 2 * rows * (tokens + text + d * K + actions);
+  // Re-encoding: L = (T - 1) S positions; every block but the last attends causally, the last stores keys and values.
+  const double L = (T - 1) * S;
+  f.world_frame_reencode = 2 * rows * (L * ((layers - 1) * block + kv) + (layers - 1) * 2 * d * L * (L + 1) / 2);
+
+  // The video decoder, mirroring decoder/unet.cpp as decoder_params does: per level, its pixels over T' frames.
+  const auto& v = c.decoder;
+  const int levels = static_cast<int>(v.channel_mult.size());
+  const double frames = v.frames;
+  auto pixels = [&](int level) { return double(c.data.height >> level) * double(c.data.width >> level); };
+  auto in = [](const std::vector<int>& ls, int level) { return std::find(ls.begin(), ls.end(), level) != ls.end(); };
+  const double ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
+  double macs = frames * (ch * emb + emb * emb);  // diffusion-time MLP
+  auto conv_at = [&](int level, double cin, double cout, double k) { macs += frames * pixels(level) * cin * cout * k * k; };
+  auto layer = [&](int level, double cin, double cout) {
+    conv_at(level, cin, cout, 3);
+    conv_at(level, cout, cout, 3);
+    if (cin != cout) conv_at(level, cin, cout, 1);
+    macs += frames * emb * 2 * cout;  // FiLM
+    const double px = pixels(level);
+    if (in(v.attn_levels, level)) macs += frames * (px * 4 * cout * cout + 2 * px * px * cout);  // within a frame
+    if (in(v.temporal_levels, level)) macs += frames * px * (4 * cout * cout + 2 * frames * cout);  // across frames
+  };
+  double cw = ch * v.channel_mult[0];
+  conv_at(0, 3 + 1 + E + (v.cond_image ? 3 : 0), cw, 3);
+  std::vector<double> skips{cw};
+  for (int i = 0; i < levels; ++i) {
+    const double co = ch * v.channel_mult[static_cast<size_t>(i)];
+    conv_at(i, E, cw, 1);  // the token embedding added at the start of each level
+    for (int r = 0; r < v.res_blocks; ++r) {
+      layer(i, cw, co);
+      cw = co;
+      skips.push_back(cw);
+    }
+    if (i + 1 < levels) {
+      conv_at(i + 1, cw, cw, 3);  // stride 2: the next level's pixels
+      skips.push_back(cw);
+    }
+  }
+  layer(levels - 1, cw, cw);
+  layer(levels - 1, cw, cw);
+  for (int i = levels - 1; i >= 0; --i) {
+    const double co = ch * v.channel_mult[static_cast<size_t>(i)];
+    for (int r = 0; r < v.res_blocks + 1; ++r) {
+      const double skip = skips.back();
+      skips.pop_back();
+      layer(i, cw + skip, co);
+      cw = co;
+    }
+    if (i > 0) conv_at(i - 1, cw, cw, 3);  // after a nearest 2x upsampling
+  }
+  conv_at(0, cw, 3, 3);
+  f.decoder_window = 2 * macs;
+  // Windows a second: backward ones advance T' - 2 frames at the token rate (decoder::kOverlapFrames), upsampling
+  // ones T' - 1 frames at 12.5 and at 25 Hz; only the backward windows hold frames with tokens.
+  const double fps = c.data.world_fps, per_window = v.ddim_steps * f.decoder_window;
+  f.decoder_video_second = per_window * ((1 + v.mix_probability) * fps / (frames - decoder::kOverlapFrames) +
+                                         (2 * fps + 4 * fps) / (frames - 1));
+  return f;
+}
+
 namespace {
+std::string flop(double v) {  // SI prefixes: 7.69 MFLOP, 4.79 TFLOP
+  const char* prefix[] = {"", "k", "M", "G", "T", "P", "E"};
+  int i = 0;
+  for (; i < 6 && v >= 1000; ++i) v /= 1000;
+  return fmt::format("{:.3g} {}FLOP", v, prefix[i]);
+}
+
 std::string human(double v) {
   if (v >= 1e9) return fmt::format("{:.2f}B", v / 1e9);
   if (v >= 1e6) return fmt::format("{:.2f}M", v / 1e6);
@@ -210,6 +296,14 @@ std::string format_plan(const Plan& p, const Config& c) {
                    p.world_train_state_gb);
   s += fmt::format("  activations      {:.2f} GB/sequence (bf16, FlashAttention); {:.2f} GB with checkpointing\n",
                    p.world_act_gb_per_seq, p.world_act_ckpt_gb_per_seq);
+  const auto f = inference_flops(c, 2);
+  s += fmt::format("  inference        {} a sampled token (one row, full context); a closed-loop frame with\n"
+                   "                   guidance (2 rows): {} sampling + {} re-encoding the window (§2.3)\n",
+                   flop(f.world_token), flop(f.world_frame_sampling), flop(f.world_frame_reencode));
+  s += fmt::format("video decoder: {} a U-Net pass over T' = {} frames; {} a second of {:g} Hz video at {} DDIM\n"
+                   "  steps (decoder.ddim_steps)\n",
+                   flop(f.decoder_window), c.decoder.frames, flop(f.decoder_video_second), 4 * c.data.world_fps,
+                   c.decoder.ddim_steps);
   s += fmt::format("tokenizer bit compression  H W 3 8 / (n log2 K) = {:.1f}\n", p.bit_compression);
   return s;
 }

@@ -37,6 +37,22 @@ struct Plan {
 
 Plan make_plan(const Config& c);
 
+// Inference arithmetic, to set a measured time against a machine's peak (docs/benchmarks.md): FLOPs of the
+// matrix products and attention's two products (a multiply-add is 2), counted from the config as the parameter
+// counts are. Norms, activations and softmax are left out, so time at the peak is a lower bound.
+struct InferenceFlops {
+  double world_token = 0;           // one image token of one row through every block and the head, full context
+  double world_frame_sampling = 0;  // a frame sampled in a full window: its text, n tokens and actions, all rows
+  double world_frame_reencode = 0;  // §2.3's one-step slide: the T - 1 kept steps encoded again, all rows (causal)
+  double decoder_window = 0;        // one U-Net forward over a window of T' frames at data.height x data.width
+  // One second of video at four times the token rate (25 Hz from 6.25), in the long run (§5.2's schedule:
+  // backward windows at the token rate, then two doublings by interpolation), decoder.ddim_steps forwards a
+  // window, one more at decoder.mix_probability where a window's frames have tokens (image/video mixing).
+  double decoder_video_second = 0;
+};
+// `rows`: 2 where classifier-free guidance runs a conditional and an unconditional row, else 1.
+InferenceFlops inference_flops(const Config& c, int rows);
+
 // The memory one rank holds at its peak while training the world model, term by term (bytes), for a run's own
 // settings: `gaia plan --nproc --accumulate --shard-optimizer --shard-gradients` prints it, and `world train` reports it beside the
 // peak it measures. The peak falls at the start of the backward pass, with every saved activation and the output
