@@ -2,6 +2,10 @@
 
 #include <chrono>
 
+#if defined(__linux__)
+#include <pthread.h>
+#endif
+
 #include <ATen/Parallel.h>
 
 #include "gaia/core/error.h"
@@ -197,6 +201,9 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
     const Precision precision = o_.precision;
     ahead_.job = std::async(std::launch::async, [model, hist, now, cache, row, progress, t, n, B, d,
                                                  precision]() mutable {
+#if defined(__linux__)
+                   pthread_setname_np(pthread_self(), "gaia-lookahead");  // apart in top -H and perf --sort comm
+#endif
                    torch::NoGradGuard ng;
                    Autocast autocast(precision, torch::kCPU);
                    cache.reset();
