@@ -7,7 +7,9 @@
 #include "gaia/config.h"
 #include "gaia/decoder/diffusion.h"
 #include "gaia/decoder/unet.h"
+#include "gaia/sizing/sizing.h"
 #include "gaia/tokenizer/autoencoder.h"
+#include "gaia/torch/precision.h"
 #include "gaia/torch/tensor_io.h"
 #include "gaia/train/optim.h"
 
@@ -38,18 +40,22 @@ DenoiserInput input(const Config& c, int64_t B) {
 
 }  // namespace
 
-// Arg: 1 = temporal attention at every level, 0 = the default (levels 1, 2).
+// Args: temporal attention at every level (1) or the default levels 1, 2 (0); the products in float32 (0) or under
+// bf16 autocast (1, as `gaia decode --precision bf16`). FLOP/s: the pass's FLOPs as `gaia plan` counts them.
 static void BM_DecoderDdimStep(benchmark::State& st) {
   Config c = bench_config(st.range(0) == 1);
   torch::manual_seed(0);
   VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
   m->eval();
   torch::NoGradGuard ng;
+  Autocast autocast(st.range(1) == 1 ? Precision::kBf16 : Precision::kFp32, torch::kCPU);
   auto in = input(c, 1);
   for (auto _ : st) benchmark::DoNotOptimize(m->forward(in));
   st.counters["frames/s"] = benchmark::Counter(double(c.decoder.frames) * st.iterations(), benchmark::Counter::kIsRate);
+  st.counters["FLOP/s"] = benchmark::Counter(sizing::inference_flops(c, 1).decoder_window * double(st.iterations()),
+                                             benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_DecoderDdimStep)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DecoderDdimStep)->Args({0, 0})->Args({1, 0})->Args({0, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 static void BM_DecoderTrainStep(benchmark::State& st) {
   Config c = bench_config(st.range(0) == 1);
