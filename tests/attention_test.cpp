@@ -50,6 +50,20 @@ TEST(Attention, CausalMaskSeesOnlyEarlierKeys) {
             std::string::npos);
 }
 
+// Training on scores the causal softmax kernel does not take (here float64) goes through the masked softmax, on
+// the scores already computed: the formula's values and gradients.
+TEST(Attention, CausalTrainingOnScoresTheKernelDoesNotTake) {
+  torch::manual_seed(5);
+  const auto o = torch::TensorOptions().dtype(torch::kDouble);
+  auto q = torch::randn({2, 6, 8}, o).requires_grad_(), k = torch::randn({2, 6, 8}, o).requires_grad_(),
+       v = torch::randn({2, 6, 8}, o).requires_grad_();
+  auto got = attention(q, k, v, {}, true);
+  auto want = reference(q, k, v, causal_mask(6, 6, 0, o));
+  EXPECT_TRUE(torch::allclose(got, want, 1e-12, 1e-12));
+  auto g = torch::autograd::grad({got.sum()}, {q, k, v}), h = torch::autograd::grad({want.sum()}, {q, k, v});
+  for (size_t i = 0; i < 3; ++i) EXPECT_TRUE(torch::allclose(g[i], h[i], 1e-10, 1e-12)) << i;
+}
+
 // The causal softmax kernel (torch/causal_softmax.h) against LibTorch's masked softmax, forward and backward, in
 // float32 and bf16, on rows of every length from 1 to L (L not a multiple of eight): zeros after each query's keys,
 // float32 to within rounding, bf16 to within its own rounding of the same float32 values.

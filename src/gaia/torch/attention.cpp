@@ -35,24 +35,28 @@ torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const to
   // Training (a gradient wanted) on the CPU: the causal softmax kernel. Inference keeps one path for every causal
   // attention, whole or block by block, so a rollout's tokens do not depend on how its cache was filled.
   const bool grad = torch::GradMode::is_enabled() && (q.requires_grad() || k.requires_grad() || v.requires_grad());
+  torch::Tensor att;  // [n, Lq, Lk], batched 3-D products over the leading dimensions
   if (causal && !bias.defined() && q.device().is_cpu() && grad) {
     auto s = torch::bmm(q3, kt);  // [n, L, L], the scale applied as the softmax reads them
     if (causal_softmax_applies(s)) return torch::bmm(causal_softmax(s, scale).to(v3.scalar_type()), v3).view(out);
-  }
-  torch::Tensor mask = bias;
-  if (causal) mask = mask.defined() ? mask + causal_mask(Lq, Lk, 0, q.options()) : causal_mask(Lq, Lk, 0, q.options());
-  torch::Tensor att;  // [n, Lq, Lk], batched 3-D products over the leading dimensions
-  if (mask.defined() && mask.dim() == 2) {
-    att = torch::baddbmm(mask, q3, kt, /*beta=*/1.0, /*alpha=*/scale);  // the mask fused into the product
-  } else if (mask.defined()) {
-    auto scores = lead;
-    scores.insert(scores.end(), {Lq, Lk});
-    att = ((torch::bmm(q3, kt) * scale).view(scores) + mask).reshape({n, Lq, Lk});
+    att = s * scale + causal_mask(Lq, Lk, 0, s.options());  // scores the kernel does not take (fp16), kept
   } else {
-    att = torch::bmm(q3, kt) * scale;
+    torch::Tensor mask = bias;
+    if (causal) mask = mask.defined() ? mask + causal_mask(Lq, Lk, 0, q.options()) : causal_mask(Lq, Lk, 0, q.options());
+    if (mask.defined() && mask.dim() == 2) {
+      att = torch::baddbmm(mask, q3, kt, /*beta=*/1.0, /*alpha=*/scale);  // the mask fused into the product
+    } else if (mask.defined()) {
+      auto scores = lead;
+      scores.insert(scores.end(), {Lq, Lk});
+      att = ((torch::bmm(q3, kt) * scale).view(scores) + mask).reshape({n, Lq, Lk});
+    } else {
+      att = torch::bmm(q3, kt) * scale;
+    }
   }
-  // Softmax statistics in float32 under bf16 / fp16 autocast (a no-op in float32).
-  return torch::bmm(torch::softmax(att, -1, torch::kFloat).to(v3.scalar_type()), v3).view(out);
+  // Softmax statistics in float32 for bf16 / fp16 scores (autocast), in the scores' own type otherwise.
+  const auto t = att.scalar_type();
+  const auto stats = t == torch::kBFloat16 || t == torch::kHalf ? torch::kFloat : t;
+  return torch::bmm(torch::softmax(att, -1, stats).to(v3.scalar_type()), v3).view(out);
 }
 
 }  // namespace gaia

@@ -153,11 +153,6 @@ torch::Tensor WorldModelImpl::forward(const WorldBatch& b) {
   return CopyBias::of(cfg).apply(logits(h.index_select(1, sel)).view({B, T, n, K}), b.tokens);
 }
 
-torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias) {
-  auto idx = prev.to(torch::kLong).unsqueeze(-1);
-  return logits.scatter_add(-1, idx, torch::full(idx.sizes(), bias, logits.options()));
-}
-
 torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, const torch::Tensor& bias) {
   return logits.scatter_add(-1, prev.to(torch::kLong).unsqueeze(-1), bias.to(logits.dtype()).unsqueeze(-1));
 }
@@ -174,9 +169,7 @@ torch::Tensor CopyBias::apply(const torch::Tensor& logits, const torch::Tensor& 
   // Frame 0 of a window has no earlier frame in view.
   auto tok = tokens.to(logits.device(), torch::kLong);
   auto prev = tok.slice(1, 0, T - 1), cur = tok.slice(1, 1);
-  auto later = run == 0 ? with_copy_bias(logits.slice(1, 1), prev, bias)
-                        : with_copy_bias(logits.slice(1, 1), prev, per_slot(cur, prev));
-  return torch::cat({logits.narrow(1, 0, 1), later}, 1);
+  return torch::cat({logits.narrow(1, 0, 1), with_copy_bias(logits.slice(1, 1), prev, per_slot(cur, prev))}, 1);
 }
 
 KVCache WorldModelImpl::make_cache(int64_t batch, int64_t capacity, c10::optional<torch::ScalarType> dtype) const {

@@ -61,9 +61,8 @@ struct WorldModelImpl : torch::nn::Module {
 };
 TORCH_MODULE(WorldModel);
 
-// world.copy_bias: logits [..., K] with `bias` added at the code each position held one frame earlier, prev [...].
-torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, double bias);
-// ... with one bias per position, bias [...] in the logits' dtype.
+// world.copy_bias: logits [..., K] with bias [...] (one per position, cast to the logits' dtype) added at the code
+// each position held one frame earlier, prev [...].
 torch::Tensor with_copy_bias(const torch::Tensor& logits, const torch::Tensor& prev, const torch::Tensor& bias);
 
 // The copy logit of image slot i: world.copy_bias, plus world.copy_bias_run where slot i - 1 of the same frame kept

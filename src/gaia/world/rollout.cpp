@@ -262,13 +262,9 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       continue;
     }
     auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
-    if (biased && copy.run == 0) {
-      lg = with_copy_bias(lg, tokens_.select(1, k - 1).select(1, i), copy.bias);
-    } else if (biased) {
-      auto now = tokens_.select(1, k), before = tokens_.select(1, k - 1);  // [B, n]
-      auto rows = i == 0 ? torch::full({B}, copy.bias, lg.options().dtype(torch::kDouble))  // CopyBias::per_slot at i
-                         : (now.select(1, i - 1) == before.select(1, i - 1)).to(torch::kDouble) * copy.run + copy.bias;
-      lg = with_copy_bias(lg, before.select(1, i), rows);
+    if (biased) {  // slot i's bias depends on slots up to i - 1 only, which are sampled
+      auto now = tokens_.select(1, k).narrow(1, 0, i + 1), before = tokens_.select(1, k - 1).narrow(1, 0, i + 1);
+      lg = with_copy_bias(lg, before.select(1, i), copy.per_slot(now, before).select(1, i));
     }
     torch::Tensor tok;
     if (guided_) {
