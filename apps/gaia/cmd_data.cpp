@@ -81,7 +81,7 @@ void register_data(CLI::App& app) {
     auto flags = std::make_shared<SharedFlags>();
     auto root = std::make_shared<std::string>();
     cmd->add_option("DATASET", *root, "dataset directory")->required();
-    add_shared_flags(cmd, flags.get(), "unused");
+    add_shared_flags(cmd, flags.get(), "unused", WithPrecision::kNo);
     cmd->callback([=] { info(*root, resolve_config(*flags)); });
   }
 
@@ -94,7 +94,7 @@ void register_data(CLI::App& app) {
     cmd->add_option("DATASET", *root, "dataset directory")->required();
     cmd->add_option("--balance", *features, "comma-separated features: " + fmt::format("{}", fmt::join(data::known_features(), ", ")));
     cmd->add_option("--exponent", *exponent, "balancing exponent in [0, 1] (default: config data.balance_exponent)");
-    add_shared_flags(cmd, flags.get(), "directory for balance.svg and balance.json (default: DATASET)");
+    add_shared_flags(cmd, flags.get(), "directory for balance.svg and balance.json (default: DATASET)", WithPrecision::kNo);
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       data::Dataset ds(*root);
@@ -156,7 +156,7 @@ void register_data(CLI::App& app) {
     cmd->add_option("--cover", *cover, "with --hold-out-by: metadata keys whose values each need a held-out group "
                     "(default weather,time_of_day,road)")->delimiter(',');
     add_token_format_flags(cmd, format.get());
-    add_shared_flags(cmd, flags.get(), "split JSON file (default: DATASET/split.json)");
+    add_shared_flags(cmd, flags.get(), "split JSON file (default: DATASET/split.json)", WithPrecision::kNo);
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       std::vector<data::GeoBox> gb;
@@ -226,7 +226,7 @@ void register_data(CLI::App& app) {
                   "(median speed error, curvature sign, yaw rate) and print the figures");
     cmd->add_flag("--replace", *replace, "also replace signals that were measured (csv, gps, kitti-oxts, synth)");
     add_motion_flags(cmd, mo.get());
-    add_shared_flags(cmd, flags.get(), "with --compare: a JSON file for the figures (optional)");
+    add_shared_flags(cmd, flags.get(), "with --compare: a JSON file for the figures (optional)", WithPrecision::kNo);
     cmd->callback([=] {
       apply_threads(resolve_config(*flags));
       if (*compare && *replace) fail("--compare writes nothing; it cannot --replace");

@@ -136,7 +136,7 @@ void register_ingest(CLI::App& app) {
                   "no signals are given, or report how far it agrees with them where they are")
       ->check(CLI::IsMember({"none", "video"}));
   add_motion_flags(cmd, &opt->motion);
-  add_shared_flags(cmd, flags.get(), "dataset directory (created if missing)");
+  add_shared_flags(cmd, flags.get(), "dataset directory (created if missing)", WithPrecision::kNo);
   cmd->callback([=] {
     Config c = resolve_config(*flags);
     apply_threads(c);

@@ -40,7 +40,7 @@ void register_probe(CLI::App& app) {
                                      "held-out frames");
     cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)")
         ->needs(through);
-    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)");
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)", WithPrecision::kNo);
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       apply_threads(c);
@@ -82,7 +82,7 @@ void register_probe(CLI::App& app) {
     add_weights_flag(cmd, Weights::Tokenizer, tok_path.get(),
                      "also score the frames read through it (encoded and decoded), as `gaia eval` reads generated "
                      "frames (key \"decoded\")");
-    add_shared_flags(cmd, flags.get(), "output directory (probe_eval.json); default: print only");
+    add_shared_flags(cmd, flags.get(), "output directory (probe_eval.json, WithPrecision::kNo); default: print only");
     cmd->callback([=] {
       if (old_form->count() > 0) {
         if (!weights->empty()) fail("gaia probe eval: give the weights once: DATASET --probe WEIGHTS");
@@ -129,7 +129,7 @@ void register_probe(CLI::App& app) {
     add_weights_flag(cmd, Weights::Probe, weights.get())->required();
     add_weights_flag(cmd, Weights::Tokenizer, tok_path.get(), "decodes a rollout's tokens into frames");
     cmd->add_flag("--with-prompt", *with_prompt, "rollout: also read the prompt frames (default: generated frames only)");
-    add_shared_flags(cmd, flags.get(), "output directory (probe_read.json); default: print only");
+    add_shared_flags(cmd, flags.get(), "output directory (probe_read.json, WithPrecision::kNo); default: print only");
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       apply_threads(c);

@@ -17,7 +17,7 @@ void register_report(CLI::App& app) {
   auto run_dir = std::make_shared<std::string>();
   cmd->add_option("RUN_DIR", *run_dir, "run directory holding report.json (paths in it are relative to RUN_DIR)")
       ->required();
-  add_shared_flags(cmd, flags.get(), "output HTML file (default: RUN_DIR/report.html)");
+  add_shared_flags(cmd, flags.get(), "output HTML file (default: RUN_DIR/report.html)", WithPrecision::kNo);
   cmd->callback([=] {
     resolve_config(*flags);  // no config is used, but a bad --set or --config must still be an error
     const fs::path out = flags->out.empty() ? fs::path(*run_dir) / "report.html" : fs::path(flags->out);

@@ -46,7 +46,7 @@ void register_synth(CLI::App& app) {
                   "off its lane for 0.4-1.6 s, then returns; see docs/synth.md)");
   cmd->add_option("--codec", o->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
   cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
-  add_shared_flags(cmd, flags.get(), "dataset directory");
+  add_shared_flags(cmd, flags.get(), "dataset directory", WithPrecision::kNo);
   cmd->callback([=] {
     if (cmd->got_subcommand("replay") || cmd->got_subcommand("counterfactuals")) return;
     Config c = resolve_config(*flags);
@@ -78,7 +78,7 @@ void register_synth(CLI::App& app) {
   rep->add_option("--actions", *actions, "CSV with columns speed,curvature: one row per frame at the episode fps")->required();
   rep->add_option("--id", *id, "id of the replayed episode (default: <episode>-replay-<from>)");
   rep->add_flag("--overwrite", *overwrite, "replace an existing replay");
-  add_shared_flags(rep, rflags.get(), "dataset directory for the replayed episode");
+  add_shared_flags(rep, rflags.get(), "dataset directory for the replayed episode", WithPrecision::kNo);
   rep->callback([=] {
     Config c = resolve_config(*rflags);
     if (rflags->out.empty()) fail("gaia synth replay: --out DATASET is required");
@@ -107,7 +107,7 @@ void register_synth(CLI::App& app) {
   cfc->add_option("--without-meta", *without,
                   "leave out drives whose metadata has this key, e.g. synth_wander keeps the lane-keeping drives "
                   "(repeatable)");
-  add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)");
+  add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)", WithPrecision::kNo);
   cfc->callback([=] {
     Config c = resolve_config(*cflags);
     apply_threads(c);

@@ -41,7 +41,7 @@ void register_text(CLI::App& app) {
   add_weights_flag(cmd, Weights::T5, t5.get())->required();
   cmd->add_option("--m", *m, "text tokens per step (default: config world.text_tokens; the paper: 32)")
       ->check(number_in({1, 4096}));
-  add_shared_flags(cmd, flags.get(), "unused");
+  add_shared_flags(cmd, flags.get(), "unused", WithPrecision::kNo);
   cmd->callback([=] {
     Config c = resolve_config(*flags);
     apply_threads(c);

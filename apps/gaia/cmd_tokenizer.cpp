@@ -128,7 +128,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("--max-frames", *max_frames, "frames to score")->check(number_in({1, 1e9}));
     cmd->add_option("--stride", *stride, "video: use every Nth frame (a dataset's frames are spread evenly over its held-out episodes)")
         ->check(number_in({1, 1e6}));
-    add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)");
+    add_shared_flags(cmd, flags.get(), "JSON file for the metrics (optional)", WithPrecision::kNo);
     cmd->callback([=] {
       auto [dev, c, t] = open_tokenizer(*flags, *weights);
       std::vector<cv::Mat> frames;
@@ -166,7 +166,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
     add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     cmd->add_option("--max-frames", *max_frames, "frames to reconstruct")->check(number_in({1, 1e9}));
-    add_shared_flags(cmd, flags.get(), "output directory");
+    add_shared_flags(cmd, flags.get(), "output directory", WithPrecision::kNo);
     cmd->callback([=] {
       if (flags->out.empty()) fail("gaia tokenizer reconstruct: --out DIR is required");
       auto [dev, c, t] = open_tokenizer(*flags, *weights);
@@ -196,7 +196,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_option("SOURCE", *src, "video file or dataset")->required();
     add_weights_flag(cmd, Weights::Tokenizer, weights.get())->required();
     cmd->add_option("--frames", *n, "frames to show")->check(number_in({1, 1e6}));
-    add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)");
+    add_shared_flags(cmd, flags.get(), "output PNG (default: pca.png)", WithPrecision::kNo);
     cmd->callback([=] {
       auto [dev, c, t] = open_tokenizer(*flags, *weights);
       auto frames = load_frames(*src, c.data.height, c.data.width, *n, 10);
@@ -217,7 +217,7 @@ void register_tokenizer(CLI::App& app) {
     cmd->add_flag("--mirror", *mirror,
                   "also write each episode in mirror image as <id>-mirror (flipped frames, negated curvature, left/right "
                   "swapped in captions): balances left and right steering");
-    add_shared_flags(cmd, flags.get(), "token dataset directory");
+    add_shared_flags(cmd, flags.get(), "token dataset directory", WithPrecision::kNo);
     cmd->callback([=] {
       Config run = resolve_config(*flags);
       apply_threads(run);

@@ -216,7 +216,7 @@ void register_world(CLI::App& app) {
     cmd->add_option("--without-meta", *without,
                     "leave out episodes whose metadata has this key: calibrate on the kind of driving you will roll "
                     "out, e.g. synth_wander keeps gaia synth's lane-keeping drives (repeatable)");
-    add_shared_flags(cmd, flags.get(), "output weights file (may be --world itself)");
+    add_shared_flags(cmd, flags.get(), "output weights file (may be --world itself)", WithPrecision::kNo);
     cmd->callback([=] {
       Config run = resolve_config(*flags);
       apply_threads(run);

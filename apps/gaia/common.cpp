@@ -47,12 +47,13 @@ int run_gaia_child(const std::vector<std::string>& args) {
 
 std::string g_command_line = "gaia";
 
-void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help) {
+void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help, WithPrecision precision) {
   cmd->add_option("--config", f->config, "YAML config (configs/tiny.yaml, default.yaml, paper.yaml); default: built-in default");
   cmd->add_option("--set", f->sets, "override a config key, e.g. --set world.d_model=512 (repeatable)");
   cmd->add_option("--device", f->device, "cpu | cuda | cuda:N (default: config run.device)");
-  cmd->add_option("--precision", f->precision,
-                  "fp32 | bf16 | fp16: mixed precision of training and sampling (default: config run.precision)");
+  if (precision == WithPrecision::kYes)
+    cmd->add_option("--precision", f->precision,
+                    "fp32 | bf16 | fp16: mixed precision of training and sampling (default: config run.precision)");
   cmd->add_option("--threads", f->threads, "CPU threads (0 = all cores)");
   cmd->add_option("--seed", f->seed, "random seed (default: config run.seed)");
   cmd->add_option("--out", f->out, out_help);

@@ -37,7 +37,11 @@ struct SharedFlags {
 };
 
 // Adds --config/--set/--device/--precision/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
-void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory");
+// A command whose work has no matrix products to run in another precision leaves --precision out (`precision` =
+// WithPrecision::kNo), so that a run asking for one is refused instead of quietly running in float32.
+enum class WithPrecision { kYes, kNo };
+void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory",
+                      WithPrecision precision = WithPrecision::kYes);
 
 // The CLI's one rule: data positional, weights by component. Each component's weights flag is declared here, with
 // one name and one help text; `use` adds what this command does with them (e.g. "decodes the preview").
