@@ -94,7 +94,8 @@ void register_data(CLI::App& app) {
     cmd->add_option("DATASET", *root, "dataset directory")->required();
     cmd->add_option("--balance", *features, "comma-separated features: " + fmt::format("{}", fmt::join(data::known_features(), ", ")));
     cmd->add_option("--exponent", *exponent, "balancing exponent in [0, 1] (default: config data.balance_exponent)");
-    add_shared_flags(cmd, flags.get(), "directory for balance.svg and balance.json (default: DATASET)", WithPrecision::kNo);
+    add_shared_flags(cmd, flags.get(), "directory for balance.svg and balance.json (default: DATASET)",
+                     WithPrecision::kNo);
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       data::Dataset ds(*root);

@@ -80,7 +80,8 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--plot", e->plots, "an extra SVG plot for the report (e.g. the balance.svg of gaia data stats)")
       ->take_all();
   cmd->add_option("--world-eval", e->world_eval, "a `gaia world eval` output directory to include in the report");
-  add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)", WithPrecision::kNo);
+  add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)",
+                   WithPrecision::kNo);
   cmd->callback([=] {
     old_spelling_into(*old_dataset, e->dataset);
     Config run = resolve_config(*flags);

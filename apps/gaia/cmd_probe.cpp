@@ -40,7 +40,8 @@ void register_probe(CLI::App& app) {
                                      "held-out frames");
     cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)")
         ->needs(through);
-    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)", WithPrecision::kNo);
+    add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)",
+                     WithPrecision::kNo);
     cmd->callback([=] {
       Config c = resolve_config(*flags);
       apply_threads(c);

@@ -107,7 +107,8 @@ void register_synth(CLI::App& app) {
   cfc->add_option("--without-meta", *without,
                   "leave out drives whose metadata has this key, e.g. synth_wander keeps the lane-keeping drives "
                   "(repeatable)");
-  add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)", WithPrecision::kNo);
+  add_shared_flags(cfc, cflags.get(), "dataset directory for the replays (resumes: replays already there are kept)",
+                   WithPrecision::kNo);
   cfc->callback([=] {
     Config c = resolve_config(*cflags);
     apply_threads(c);

@@ -37,8 +37,8 @@ struct SharedFlags {
 };
 
 // Adds --config/--set/--device/--precision/--threads/--seed/--out to a subcommand. `out_help` says what --out is.
-// A command whose work has no matrix products to run in another precision leaves --precision out (`precision` =
-// WithPrecision::kNo), so that a run asking for one is refused instead of quietly running in float32.
+// A command that does not run its products under run.precision leaves --precision out (WithPrecision::kNo), so
+// that a run asking for bf16 there is refused instead of quietly running in float32.
 enum class WithPrecision { kYes, kNo };
 void add_shared_flags(CLI::App* cmd, SharedFlags* f, const std::string& out_help = "output directory",
                       WithPrecision precision = WithPrecision::kYes);
