@@ -57,6 +57,34 @@ static void BM_DecoderDdimStep(benchmark::State& st) {
 }
 BENCHMARK(BM_DecoderDdimStep)->Args({0, 0})->Args({1, 0})->Args({0, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Where a pass's time goes: the default U-Net (arg 0), its temporal layers off (1), and no spatial attention either
+// (2), in float32.
+static void BM_DecoderPassParts(benchmark::State& st) {
+  Config c = bench_config(false);
+  if (st.range(0) == 2) c.decoder.attn_levels = {};
+  torch::manual_seed(0);
+  VideoUNet m(c.decoder, c.tokenizer.codebook_size, c.tokenizer.downsample);
+  m->eval();
+  torch::NoGradGuard ng;
+  auto in = input(c, 1);
+  in.temporal = st.range(0) == 0;
+  for (auto _ : st) benchmark::DoNotOptimize(m->forward(in));
+}
+BENCHMARK(BM_DecoderPassParts)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// One of the full-resolution 3x3 convolutions (32 channels over T' = 7 frames at 72x128), NCHW (arg 0) or
+// channels-last (1).
+static void BM_DecoderConv(benchmark::State& st) {
+  Config c = bench_config(false);
+  const int64_t ch = c.decoder.channels;
+  torch::nn::Conv2d conv(torch::nn::Conv2dOptions(ch, ch, 3).padding(1));
+  torch::NoGradGuard ng;
+  auto x = torch::randn({c.decoder.frames, ch, c.data.height, c.data.width});
+  if (st.range(0) == 1) x = x.contiguous(at::MemoryFormat::ChannelsLast);
+  for (auto _ : st) benchmark::DoNotOptimize(conv(x));
+}
+BENCHMARK(BM_DecoderConv)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 static void BM_DecoderTrainStep(benchmark::State& st) {
   Config c = bench_config(st.range(0) == 1);
   torch::manual_seed(0);
