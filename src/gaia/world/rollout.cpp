@@ -1,5 +1,6 @@
 #include "gaia/world/rollout.h"
 
+#include <algorithm>
 #include <chrono>
 
 #if defined(__linux__)
@@ -262,9 +263,11 @@ torch::Tensor RolloutStepper::step(const RolloutPrompt& p, const torch::Tensor& 
       continue;
     }
     auto lg = next.to(torch::kFloat);  // [B, K]; guidance and sampling in float32 under autocast
-    if (biased) {  // slot i's bias depends on slots up to i - 1 only, which are sampled
-      auto now = tokens_.select(1, k).narrow(1, 0, i + 1), before = tokens_.select(1, k - 1).narrow(1, 0, i + 1);
-      lg = with_copy_bias(lg, before.select(1, i), copy.per_slot(now, before).select(1, i));
+    if (biased) {  // slot i's bias depends on slot i - 1 only, which is sampled
+      const int64_t a = std::max<int64_t>(0, i - 1);
+      auto now = tokens_.select(1, k).narrow(1, a, i + 1 - a);
+      auto before = tokens_.select(1, k - 1).narrow(1, a, i + 1 - a);
+      lg = with_copy_bias(lg, before.select(1, i - a), copy.per_slot(now, before).select(1, i - a));
     }
     torch::Tensor tok;
     if (guided_) {
