@@ -88,10 +88,10 @@ TEST(Cli, BadFlagsAndConfigsExitNonZero) {
   test::expect_one_error_line(test::run_gaia("plan --set data.height=nan"), "data.height");
   test::expect_one_error_line(test::run_gaia("plan --device tpu"), "--device");
   // --precision only where the work honours it: elsewhere asking for bf16 is refused, not run in float32.
-  for (const char* sub : {"eval a b --world w --tokenizer t", "data info d", "tokenizer eval d --tokenizer t",
+  for (const char* sub : {"data info d", "tokenizer eval d --tokenizer t",
                           "world calibrate d --world w", "synth --out o", "report r"})
     test::expect_one_error_line(test::run_gaia(std::string(sub) + " --precision bf16"), "--precision");
-  for (const char* sub : {"generate", "world eval", "world train", "decode", "sim", "demo", "train-all"})
+  for (const char* sub : {"generate", "eval", "world eval", "world train", "decode", "sim", "demo", "train-all"})
     EXPECT_NE(test::run_gaia(std::string(sub) + " --help").output.find("--precision"), std::string::npos) << sub;
 }
 

@@ -660,6 +660,20 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   EXPECT_FALSE(cold["guide_actions_within_top_k"].get<bool>());
   EXPECT_NE(cold["long_rollout"]["windows"][1]["entropy_bits"].get<double>(), lr["windows"][1]["entropy_bits"].get<double>());
 
+  // --precision bf16: the rollouts' products in bf16 where the CPU has them (else fp32, said); the real windows the
+  // rollouts are set against are the data's and do not change.
+  EXPECT_EQ(j["precision"], "fp32");
+  r = test::run_gaia(base + " --only long --long-seconds 2 --window-seconds 1 --precision bf16 --out " + q(p.dir / "eval-bf16"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto bf = nlohmann::json::parse(read_file(p.dir / "eval-bf16" / "eval.json"));
+  EXPECT_EQ(bf["precision"], cpu_has_bf16() ? "bf16" : "fp32");
+  EXPECT_EQ(bf["long_rollout"]["frames"].get<int>(), 13);
+  EXPECT_EQ(bf["long_rollout"]["real_copy_rate"].get<double>(), lr["real_copy_rate"].get<double>());
+  for (const auto& w : bf["long_rollout"]["windows"]) {
+    EXPECT_GE(w["copy_rate"].get<double>(), 0.0);
+    EXPECT_LE(w["copy_rate"].get<double>(), 1.0);
+  }
+
   // The steering response curve: the sweep's commands replace the default ones, each with its own read-back.
   r = test::run_gaia(base + " --only action --commands sweep --prompts 1 --prompt-frames 2 --frames " + std::to_string(K - 1) +
                      " --out " + q(p.dir / "eval-sweep"));

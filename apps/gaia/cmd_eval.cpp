@@ -80,8 +80,7 @@ void register_eval(CLI::App& app) {
   cmd->add_option("--plot", e->plots, "an extra SVG plot for the report (e.g. the balance.svg of gaia data stats)")
       ->take_all();
   cmd->add_option("--world-eval", e->world_eval, "a `gaia world eval` output directory to include in the report");
-  add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)",
-                   WithPrecision::kNo);
+  add_shared_flags(cmd, flags.get(), "output directory (eval.json, report.json, report.html, plots/, videos/)");
   cmd->callback([=] {
     old_spelling_into(*old_dataset, e->dataset);
     Config run = resolve_config(*flags);
@@ -93,6 +92,7 @@ void register_eval(CLI::App& app) {
     auto dev = parse_device(run.run.device);
     auto m = emerging::load_models(e->world, e->tokenizer, e->dynamics_probe, e->scene_probe, dev, e->t5);
     if (!e->realism_probe.empty()) emerging::load_realism_probe(m, e->realism_probe);
+    m.precision = run_precision(run, dev, "eval");  // the rollouts'; the probes read their frames in float32
     apply_sampling_sets(*flags, "world", kWorldSamplingKeys, e->world, m.info.config);  // --top-k still wins
     world::TokenDataset ds(e->tokens, m.info.K);
     if (ds.tokens_per_step() != m.info.n())
@@ -111,7 +111,8 @@ void register_eval(CLI::App& app) {
                 {"tokens", e->tokens},      {"top_k", sampling.top_k},
                 {"prompt_footage", e->prompt_footage},
                 {"temperature", sampling.temperature},
-                {"guide_actions_within_top_k", sampling.guide_actions_within_top_k}};
+                {"guide_actions_within_top_k", sampling.guide_actions_within_top_k},
+                {"precision", to_string(m.precision)}};
     o.action.prompts = e->prompts;
     o.action.prompt_frames = e->prompt_frames;
     o.action.frames = e->frames;

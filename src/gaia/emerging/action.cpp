@@ -200,6 +200,7 @@ nlohmann::json action_control(Models& m, const world::TokenDataset& ds, const da
   ro.frames = int(F);
   ro.futures = int(R);
   ro.sampling = o.sampling;
+  ro.precision = m.precision;
   ro.guidance.scale = o.guidance_scale;  // the baseline is guided too: towards the prompt's own actions
   ro.seed = o.seed;
   auto with = world::rollout(m.world, cond, ro);

@@ -17,6 +17,7 @@
 #include "gaia/probe/probe.h"
 #include "gaia/tokenizer/autoencoder.h"
 #include "gaia/text/encoder.h"
+#include "gaia/torch/precision.h"
 #include "gaia/world/footage.h"
 #include "gaia/world/io.h"
 #include "gaia/world/token_dataset.h"
@@ -30,6 +31,9 @@ struct Models {
   probe::ProbeNet dynamics{nullptr}, scene{nullptr};
   probe::ProbeNet realism{nullptr};  // optional (load_realism_probe): whether futures of real prompts stay real
   torch::Device dev{torch::kCPU};
+  // Every rollout's products (--precision, world::RolloutOptions::precision); the tokenizer and the probes that
+  // read the frames back stay float32, so a measure reads bf16 rollouts with the same instrument.
+  Precision precision = Precision::kFp32;
   // Text prompts as the world model reads them (world/prompt_text.h); null for a model that reads T5 embeddings
   // when no T5 was given (text prompts then fail naming --t5).
   std::shared_ptr<text::TextEncoder> text;

@@ -74,6 +74,7 @@ nlohmann::json futures_diversity(Models& m, const world::TokenDataset& ds, const
   ro.frames = int(F);
   ro.futures = int(o.prompts * N);
   ro.sampling = o.sampling;
+  ro.precision = m.precision;
   ro.seed = o.seed + 1;
   auto r = world::rollout(m.world, p, ro);
   auto gen = r.tokens.narrow(1, P, F);  // [prompts * N, F, n]
@@ -133,6 +134,7 @@ nlohmann::json long_rollout(Models& m, const world::TokenDataset& ds, const Roll
   ro.frames = int(F);
   ro.futures = int(R);
   ro.sampling = o.sampling;
+  ro.precision = m.precision;
   ro.seed = o.seed + 2;
   ProgressBar bar(F, R > 1 ? fmt::format("long rollouts ({} at once)", R) : std::string("long rollout"));
   auto r = world::rollout(m.world, p, ro, [&](int done, int) { bar.update(done); });

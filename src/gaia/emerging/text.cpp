@@ -135,6 +135,7 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
     ro.frames = int(F);
     ro.futures = int(N);
     ro.sampling = o.sampling;
+    ro.precision = m.precision;
     ro.guidance = run.guidance;
     ro.guidance.total_frames = int(F);
     ro.seed = o.seed + 17 * ri;

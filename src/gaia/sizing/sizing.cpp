@@ -98,52 +98,72 @@ ParamCount world_params(const Config& cfg) {
   return out;
 }
 
-ParamCount decoder_params(const Config& cfg) {
-  // Mirrors decoder/unet.cpp (a test checks the count against the built model).
+namespace {
+
+bool at_level(const std::vector<int>& levels, int level) {
+  return std::find(levels.begin(), levels.end(), level) != levels.end();
+}
+
+// The 3D U-Net of decoder/unet.cpp in build order, the one walk both counts take: `conv(level, cin, cout, k)` for
+// each convolution outside a layer (level: the resolution it runs at), `layer(level, cin, cout)` for each residual
+// block with the attention its level carries. The output convolution (before it, a GroupNorm) is the last conv.
+template <class Conv, class Layer>
+void walk_unet(const Config& cfg, Conv conv_at, Layer layer) {
   const auto& v = cfg.decoder;
   const int L = static_cast<int>(v.channel_mult.size());
+  const int64_t ch = v.channels, E = v.token_embed_dim;
+  auto width = [&](int level) { return ch * v.channel_mult[static_cast<size_t>(level)]; };
+  // Input: noisy frame (3) + context mask (1) + upsampled token embedding (E) [+ tokenizer-decoded image (3)].
+  int64_t c = width(0);
+  conv_at(0, 3 + 1 + E + (v.cond_image ? 3 : 0), c, 3);
+  std::vector<int64_t> skips{c};
+  for (int i = 0; i < L; ++i) {
+    conv_at(i, E, c, 1);  // the token embedding added at the start of each level
+    for (int r = 0; r < v.res_blocks; ++r) {
+      layer(i, c, width(i));
+      c = width(i);
+      skips.push_back(c);
+    }
+    if (i + 1 < L) {
+      conv_at(i + 1, c, c, 3);  // stride 2: it runs at the next level's pixels
+      skips.push_back(c);
+    }
+  }
+  layer(L - 1, c, c);
+  layer(L - 1, c, c);
+  for (int i = L - 1; i >= 0; --i) {
+    for (int r = 0; r < v.res_blocks + 1; ++r) {
+      const int64_t skip = skips.back();
+      skips.pop_back();
+      layer(i, c + skip, width(i));
+      c = width(i);
+    }
+    if (i > 0) conv_at(i - 1, c, c, 3);  // after a nearest 2x upsampling
+  }
+  conv_at(0, c, 3, 3);
+}
+
+}  // namespace
+
+ParamCount decoder_params(const Config& cfg) {
+  // A test checks the count against the built model.
+  const auto& v = cfg.decoder;
   const int64_t ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
-  auto in = [](const std::vector<int>& levels, int level) {
-    for (int a : levels) if (a == level) return true;
-    return false;
-  };
   // Factorised attention (Ho et al. 2022): temporal attention across frames at temporal_levels (LayerNorm, qkv,
   // proj, a relative-position bias of 2T'-1 entries per head), spatial attention within a frame at attn_levels.
   auto temporal = [&](int64_t c) { return layer_norm(c) + linear(c, 3 * c) + linear(c, c) + int64_t(2 * v.frames - 1) * v.heads; };
-  auto layer = [&](int64_t cin, int64_t cout, int level) {
-    return res_block(cin, cout, emb) + (in(v.attn_levels, level) ? attention(cout) : 0) +
-           (in(v.temporal_levels, level) ? temporal(cout) : 0);
-  };
-  int64_t p = 0, token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the "no token" embedding
+  int64_t p = 0;
+  const int64_t token_embedding = int64_t(cfg.tokenizer.codebook_size + 1) * E;  // +1: the "no token" embedding
   p += token_embedding;
   p += linear(ch, emb) + linear(emb, emb);  // diffusion-time MLP on a sinusoidal embedding
   p += 3 * emb;                              // frame-rate embedding: 6.25 / 12.5 / 25 Hz
-  // Input: noisy frame (3) + context mask (1) + upsampled token embedding (E) [+ tokenizer-decoded image (3)].
-  int64_t c = ch * v.channel_mult[0];
-  p += conv(3 + 1 + E + (v.cond_image ? 3 : 0), c, 3);
-  std::vector<int64_t> skips{c};
-  for (int i = 0; i < L; ++i) {
-    int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
-    p += conv(E, c, 1);  // token embedding added at the start of each level
-    for (int r = 0; r < v.res_blocks; ++r) {
-      p += layer(c, co, i);
-      c = co;
-      skips.push_back(c);
-    }
-    if (i + 1 < L) { p += conv(c, c, 3); skips.push_back(c); }
-  }
-  p += 2 * layer(c, c, L - 1);
-  for (int i = L - 1; i >= 0; --i) {
-    int64_t co = ch * v.channel_mult[static_cast<size_t>(i)];
-    for (int r = 0; r < v.res_blocks + 1; ++r) {
-      int64_t skip = skips.back();
-      skips.pop_back();
-      p += layer(c + skip, co, i);
-      c = co;
-    }
-    if (i > 0) p += conv(c, c, 3);
-  }
-  p += group_norm(c) + conv(c, 3, 3);
+  walk_unet(
+      cfg, [&](int, int64_t cin, int64_t cout, int k) { p += conv(cin, cout, k); },
+      [&](int level, int64_t cin, int64_t cout) {
+        p += res_block(cin, cout, emb) + (at_level(v.attn_levels, level) ? attention(cout) : 0) +
+             (at_level(v.temporal_levels, level) ? temporal(cout) : 0);
+      });
+  p += group_norm(ch * v.channel_mult[0]);  // before the output convolution
   ParamCount out;
   out.total = p;
   out.non_embedding = p - token_embedding;
@@ -201,53 +221,27 @@ InferenceFlops inference_flops(const Config& c, int rows) {
   const double L = (T - 1) * S;
   f.world_frame_reencode = 2 * rows * (L * ((layers - 1) * block + kv) + (layers - 1) * 2 * d * L * (L + 1) / 2);
 
-  // The video decoder, mirroring decoder/unet.cpp as decoder_params does: per level, its pixels over T' frames.
+  // The video decoder, the U-Net walk of decoder_params: per level, its pixels over T' frames.
   const auto& v = c.decoder;
-  const int levels = static_cast<int>(v.channel_mult.size());
   const double frames = v.frames;
   auto pixels = [&](int level) { return double(c.data.height >> level) * double(c.data.width >> level); };
-  auto in = [](const std::vector<int>& ls, int level) { return std::find(ls.begin(), ls.end(), level) != ls.end(); };
-  const double ch = v.channels, emb = 4 * ch, E = v.token_embed_dim;
+  const double ch = v.channels, emb = 4 * ch;
   double macs = frames * (ch * emb + emb * emb);  // diffusion-time MLP
-  auto conv_at = [&](int level, double cin, double cout, double k) { macs += frames * pixels(level) * cin * cout * k * k; };
-  auto layer = [&](int level, double cin, double cout) {
-    conv_at(level, cin, cout, 3);
-    conv_at(level, cout, cout, 3);
-    if (cin != cout) conv_at(level, cin, cout, 1);
-    macs += frames * emb * 2 * cout;  // FiLM
-    const double px = pixels(level);
-    if (in(v.attn_levels, level)) macs += frames * (px * 4 * cout * cout + 2 * px * px * cout);  // within a frame
-    if (in(v.temporal_levels, level)) macs += frames * px * (4 * cout * cout + 2 * frames * cout);  // across frames
+  auto conv_at = [&](int level, double cin, double cout, double k) {
+    macs += frames * pixels(level) * cin * cout * k * k;
   };
-  double cw = ch * v.channel_mult[0];
-  conv_at(0, 3 + 1 + E + (v.cond_image ? 3 : 0), cw, 3);
-  std::vector<double> skips{cw};
-  for (int i = 0; i < levels; ++i) {
-    const double co = ch * v.channel_mult[static_cast<size_t>(i)];
-    conv_at(i, E, cw, 1);  // the token embedding added at the start of each level
-    for (int r = 0; r < v.res_blocks; ++r) {
-      layer(i, cw, co);
-      cw = co;
-      skips.push_back(cw);
-    }
-    if (i + 1 < levels) {
-      conv_at(i + 1, cw, cw, 3);  // stride 2: the next level's pixels
-      skips.push_back(cw);
-    }
-  }
-  layer(levels - 1, cw, cw);
-  layer(levels - 1, cw, cw);
-  for (int i = levels - 1; i >= 0; --i) {
-    const double co = ch * v.channel_mult[static_cast<size_t>(i)];
-    for (int r = 0; r < v.res_blocks + 1; ++r) {
-      const double skip = skips.back();
-      skips.pop_back();
-      layer(i, cw + skip, co);
-      cw = co;
-    }
-    if (i > 0) conv_at(i - 1, cw, cw, 3);  // after a nearest 2x upsampling
-  }
-  conv_at(0, cw, 3, 3);
+  walk_unet(
+      c, [&](int level, int64_t cin, int64_t cout, int k) { conv_at(level, double(cin), double(cout), k); },
+      [&](int level, int64_t cin_, int64_t cout_) {
+        const double cin = double(cin_), cout = double(cout_), px = pixels(level);
+        conv_at(level, cin, cout, 3);
+        conv_at(level, cout, cout, 3);
+        if (cin != cout) conv_at(level, cin, cout, 1);
+        macs += frames * emb * 2 * cout;  // FiLM
+        // Attention within a frame (px keys), across frames (T' keys): qkv and proj 4c^2, scores and values 2c a key.
+        if (at_level(v.attn_levels, level)) macs += frames * px * (4 * cout * cout + 2 * px * cout);
+        if (at_level(v.temporal_levels, level)) macs += frames * px * (4 * cout * cout + 2 * frames * cout);
+      });
   f.decoder_window = 2 * macs;
   // Windows a second: backward ones advance T' - 2 frames at the token rate (decoder::kOverlapFrames), upsampling
   // ones T' - 1 frames at 12.5 and at 25 Hz; only the backward windows hold frames with tokens.
