@@ -368,6 +368,95 @@ TEST(Synth, CaptionsAgreeWithLabels) {
   EXPECT_EQ(n, 15 * 75);
 }
 
+// A change of conditions mid-drive: the same world and driving, drawn under the first conditions before the change
+// and exactly as the drive rendered under the new ones after it; labels follow the frames, captions lead them by
+// change_lead; "random" draws another value than the drive's own; a replay keeps the change.
+TEST(Synth, ConditionsChangeMidDriveWithTheCaptionLeading) {
+  auto o = small(53, 3.0);
+  o.weather = "clear", o.time_of_day = "day", o.scene = "lead_vehicle";
+  auto night = o, changed = o;
+  night.time_of_day = "night";
+  changed.change_at = 2.0, changed.change_lead = 1.0, changed.change_time_of_day = "night";
+  gs::Simulator base_sim(o, 4), night_sim(night, 4), sim(changed, 4);
+  int before = 0, after = 0;
+  for (int i = 0; i < 75; ++i) {
+    const double t = i / 25.0;
+    const gs::ActionStep a = base_sim.policy(), an = night_sim.policy(), ac = sim.policy();
+    ASSERT_EQ(a.speed, ac.speed) << i;  // the conditions change nothing the driver does
+    ASSERT_EQ(a.curvature, ac.curvature) << i;
+    ASSERT_EQ(an.curvature, ac.curvature) << i;
+    const auto rb = base_sim.record(a), rn = night_sim.record(an), rc = sim.record(ac);
+    const bool is_after = t >= 2.0 - 1e-9;
+    EXPECT_TRUE(same(rc.bgr, is_after ? rn.bgr : rb.bgr)) << "frame " << i;
+    EXPECT_FALSE(same(rb.bgr, rn.bgr)) << "frame " << i;
+    EXPECT_EQ(rc.labels["time_of_day"], is_after ? "night" : "day") << i;
+    EXPECT_EQ(rc.labels["weather"], "clear") << i;
+    if (t < 1.0 - 1e-9) {
+      EXPECT_EQ(rc.caption, rb.caption) << i;  // before the lead: the drive's own words
+    } else {
+      const bool names_night = rc.caption.find("night") != std::string::npos;
+      EXPECT_TRUE(names_night) << i << ": " << rc.caption;
+    }
+    (is_after ? after : before) += 1;
+    base_sim.step(a), night_sim.step(an), sim.step(ac);
+  }
+  EXPECT_EQ(before, 50);
+  EXPECT_EQ(after, 25);
+
+  // "random": another weather than the drive's own, the same for the same seed and index, varied over indices.
+  auto r = o;
+  r.change_at = 1.0, r.change_weather = "random";
+  std::set<std::string> drawn;
+  for (int i = 0; i < 12; ++i) {
+    const std::string w = gs::Simulator(r, i).spec().change_weather;
+    EXPECT_NE(w, "clear") << i;
+    EXPECT_TRUE(w == "overcast" || w == "rain" || w == "fog" || w == "snow") << w;
+    EXPECT_EQ(gs::Simulator(r, i).spec().change_weather, w);
+    drawn.insert(w);
+  }
+  EXPECT_GE(drawn.size(), 3u);
+
+  // Bad changes fail naming the flag.
+  auto expect_error = [](const gs::SynthOptions& bad, const std::string& flag) {
+    try {
+      gs::Simulator s(bad, 0);
+      ADD_FAILURE() << "no error for " << flag;
+    } catch (const gaia::Error& e) {
+      EXPECT_NE(std::string(e.what()).find(flag), std::string::npos) << e.what();
+    }
+  };
+  auto bad = changed;
+  bad.change_at = 3.5;
+  expect_error(bad, "--change-at");
+  bad = changed, bad.change_time_of_day = "";
+  expect_error(bad, "--change-at");
+  bad = changed, bad.change_weather = "hail";
+  expect_error(bad, "--change-weather");
+  bad = changed, bad.change_time_of_day = "noon";
+  expect_error(bad, "--change-time");
+  bad = changed, bad.change_lead = 2.5;
+  expect_error(bad, "--change-lead");
+  bad = o, bad.change_weather = "rain";
+  expect_error(bad, "--change-at");
+
+  // The episode records the change, and a replay after it draws the same frames.
+  TempDir tmp;
+  auto m = gs::write_episode(tmp.path / "orig", changed, 4);
+  EXPECT_EQ(m.time_of_day, "day");  // the episode's conditions are its start's
+  EXPECT_EQ(m.extra.at("synth_change_time_of_day"), "night");
+  gaia::data::Episode orig(tmp.path / "orig" / "episodes" / m.id);
+  EXPECT_EQ(orig.labels(74)["time_of_day"], "night");
+  const int64_t from = 40;
+  std::vector<gs::ActionStep> rec;
+  for (int64_t i = from; i < orig.size(); ++i) rec.push_back({orig.speed(i), orig.curvature(i)});
+  gs::replay(orig, from, rec, tmp.path / "replay", "same");
+  gaia::data::Episode rep(tmp.path / "replay" / "episodes" / "same");
+  for (int64_t i = 0; i < rep.size(); ++i) {
+    EXPECT_TRUE(same(orig.frame_bgr(from + i), rep.frame_bgr(i)) || psnr(orig.frame_bgr(from + i), rep.frame_bgr(i)) > 40) << i;
+    EXPECT_EQ(orig.caption(from + i), rep.caption(i)) << i;
+  }
+}
+
 TEST(Synth, ReplayReproducesRecordedActionsAndDivergesUnderOthers) {
   TempDir tmp;
   auto o = small(41, 3.0);

@@ -381,6 +381,16 @@ TEST(WorldCli, DistilsOnlyProceduralWindowsWhenAsked) {
     j["source"] = "dashcam.mp4";
     write_file_atomic(e.path() / "episode.json", j.dump(2));
   }
+  // ... and as procedural drives whose conditions change (synth --change-at): new to the teacher too.
+  const fs::path changing = p.dir / "changing-tokens";
+  fs::remove_all(changing);
+  fs::copy(p.tokens, changing, fs::copy_options::recursive);
+  for (auto& e : fs::directory_iterator(changing / "episodes")) {
+    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    ASSERT_EQ(j["source"].get<std::string>().rfind("synth:", 0), 0u) << j["source"];
+    j["extra"]["synth_change_at"] = "2";
+    write_file_atomic(e.path() / "episode.json", j.dump(2));
+  }
   const std::string base = p.tiny() + " --init " + q(p.trained) + " --distill-from " + q(p.trained) +
                            " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2 --set world.p_text=0.6 --steps 4"
                            " --val-every 100";
@@ -392,13 +402,19 @@ TEST(WorldCli, DistilsOnlyProceduralWindowsWhenAsked) {
   const auto all = kl(p.tokens, "", "distil-all");
   const auto procedural = kl(p.tokens, " --distill-procedural-only", "distil-procedural");
   const auto real = kl(recorded, " --distill-procedural-only", "distil-real");
+  const auto changed = kl(changing, " --distill-procedural-only", "distil-changing");
+  const auto changed_all = kl(changing, "", "distil-changing-all");
   ASSERT_EQ(all.size(), 4u);
   ASSERT_EQ(procedural.size(), 4u);
   ASSERT_EQ(real.size(), 4u);
+  ASSERT_EQ(changed.size(), 4u);
+  ASSERT_EQ(changed_all.size(), 4u);
   EXPECT_GT(all[3], 1e-6);  // the term is there to keep ...
   for (size_t i = 0; i < 4; ++i) {
     EXPECT_EQ(procedural[i], all[i]) << i;  // ... on procedural windows, exactly ...
     EXPECT_EQ(real[i], 0.0) << i;           // ... and never on recorded ones
+    EXPECT_EQ(changed[i], 0.0) << i;        // ... nor on drives whose conditions change,
+    EXPECT_EQ(changed_all[i], all[i]) << i;  // which without the flag are held like any other
   }
   auto r = test::run_gaia("world train " + q(p.tokens) + p.tiny() + " --distill-procedural-only --steps 1 --out " +
                           q(p.dir / "distil-none"));

@@ -44,6 +44,16 @@ void register_synth(CLI::App& app) {
   cmd->add_option("--swerve", o->swerve,
                   "the largest curvature of the driver's open-loop swerves, 1/m (0 = none; every 1.5-5 s it steers "
                   "off its lane for 0.4-1.6 s, then returns; see docs/synth.md)");
+  cmd->add_option("--change-at", o->change_at,
+                  "seconds into each drive at which its weather and/or time of day change (0 = never; the world, its "
+                  "motion and its traffic stay the same; see docs/synth.md, \"Changes\")");
+  cmd->add_option("--change-weather", o->change_weather,
+                  "the weather from --change-at: clear | overcast | rain | fog | snow | random (another than the drive's)");
+  cmd->add_option("--change-time", o->change_time_of_day,
+                  "the time of day from --change-at: day | dusk | night | random (another than the drive's)");
+  cmd->add_option("--change-lead", o->change_lead,
+                  "seconds before --change-at from which the captions name the new conditions (the words lead the "
+                  "scene, as a text prompt leads a rollout)");
   cmd->add_option("--codec", o->frame_codec, "frame storage: raw | png | jpg")->check(CLI::IsMember({"raw", "png", "jpg"}));
   cmd->add_flag("--overwrite", o->overwrite, "replace existing episodes with the same ids");
   add_shared_flags(cmd, flags.get(), "dataset directory", WithPrecision::kNo);

@@ -74,7 +74,8 @@ void register_world(CLI::App& app) {
                   "examples' captions (prompts that contradict the frames, as text prompting does); ~1.5x step time");
     cmd->add_flag("--distill-procedural-only", o->distill_procedural_only,
                   "with --distill-from: hold only windows of procedural drives (gaia synth) to it: a teacher that has "
-                  "never seen recorded footage keeps the procedural world and teaches nothing about real frames");
+                  "never seen recorded footage keeps the procedural world and teaches nothing about real frames (nor "
+                  "about drives whose conditions change, synth --change-at)");
     auto t5 = std::make_shared<std::string>();
     add_weights_flag(cmd, Weights::T5, t5.get(),
                      "text as its embeddings (§2.1): the captions are embedded first, once (gaia text embed), "

@@ -781,7 +781,7 @@ Renderer::Renderer(int height, int width, CameraModel cam) : h_(height), w_(widt
 
 void Renderer::render(const Scene& world, cv::Mat& out) {
   out.create(h_, w_, CV_8UC3);
-  const Env env = make_env(world.spec().weather, world.spec().time_of_day);
+  const Env env = make_env(world.weather(), world.time_of_day());  // a change of conditions applies from its time
   const Ego& ego = world.ego();
   Cam cam;
   cam.ex = ego.x, cam.ey = ego.y, cam.ch = std::cos(ego.h), cam.sh = std::sin(ego.h);

@@ -80,6 +80,33 @@ SceneSpec resolve_spec(SceneSpec spec) {
   if (weather_index(spec.weather) < 0)
     fail("synth: unknown weather '{}' (clear, overcast, rain, fog, snow)", spec.weather);
   if (time_index(spec.time_of_day) < 0) fail("synth: unknown time of day '{}' (day, dusk, night)", spec.time_of_day);
+  return resolve_change(spec);
+}
+
+SceneSpec resolve_change(SceneSpec spec) {
+  const bool asked = !spec.change_weather.empty() || !spec.change_time_of_day.empty();
+  if (spec.change_at == 0) {
+    if (asked) fail("synth: a change of weather or time of day needs its time (--change-at)");
+    return spec;
+  }
+  if (!(spec.change_at > 0 && spec.change_at < spec.seconds))
+    fail("synth: --change-at must be within the drive's (0, {}) s, got {}", spec.seconds, spec.change_at);
+  if (!(spec.change_lead >= 0 && spec.change_lead <= spec.change_at))
+    fail("synth: --change-lead must be in [0, --change-at = {}] s, got {}", spec.change_at, spec.change_lead);
+  if (!asked) fail("synth: --change-at {} s changes nothing: give --change-weather or --change-time", spec.change_at);
+  Rng r(stream_key(spec.seed, static_cast<uint64_t>(spec.index), "change"));
+  auto other = [&](const auto& values, const std::string& own) {  // uniform over the values other than `own`
+    std::vector<std::string> rest;
+    for (const char* v : values)
+      if (own != v) rest.push_back(v);
+    return rest[static_cast<size_t>(r.integer(0, static_cast<int>(rest.size()) - 1))];
+  };
+  if (spec.change_weather == "random") spec.change_weather = other(kWeathers, spec.weather);
+  if (spec.change_time_of_day == "random") spec.change_time_of_day = other(kTimesOfDay, spec.time_of_day);
+  if (!spec.change_weather.empty() && weather_index(spec.change_weather) < 0)
+    fail("synth: unknown --change-weather '{}' (clear, overcast, rain, fog, snow, random)", spec.change_weather);
+  if (!spec.change_time_of_day.empty() && time_index(spec.change_time_of_day) < 0)
+    fail("synth: unknown --change-time '{}' (day, dusk, night, random)", spec.change_time_of_day);
   return spec;
 }
 
@@ -639,11 +666,23 @@ void Scene::step(const ActionStep& act) {
   road_.ensure(ego_.s + 450);
 }
 
+const std::string& Scene::weather() const {
+  const bool changed = spec_.change_at > 0 && !spec_.change_weather.empty() && time() >= spec_.change_at;
+  return changed ? spec_.change_weather : spec_.weather;
+}
+
+const std::string& Scene::time_of_day() const {
+  const bool changed = spec_.change_at > 0 && !spec_.change_time_of_day.empty() && time() >= spec_.change_at;
+  return changed ? spec_.change_time_of_day : spec_.time_of_day;
+}
+
+bool Scene::caption_changed() const { return spec_.change_at > 0 && time() >= spec_.change_at - spec_.change_lead; }
+
 nlohmann::json Scene::labels(const ActionStep& a) const {
   using nlohmann::json;
   json j;
-  j["weather"] = spec_.weather;
-  j["time_of_day"] = spec_.time_of_day;
+  j["weather"] = weather();
+  j["time_of_day"] = time_of_day();
   j["district"] = spec_.district;
   double ldist;
   const int li = next_light(ldist);

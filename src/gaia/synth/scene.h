@@ -41,11 +41,19 @@ struct SceneSpec {
   // brings it back (0 = never). Recorded drives then contain what the action evaluation commands (strong turns, a
   // pull off the lane), so a world model can learn what such actions look like, not only what a lane keeper does.
   double swerve = 0;
+  // A change of conditions mid-drive (change_at 0 = none): from change_at seconds the world is drawn and labelled
+  // under change_weather / change_time_of_day (each "" = kept; "random" = another value than the drive's own,
+  // drawn from the seed and index), and the captions name the new conditions change_lead seconds before, so
+  // that the words lead the scene as a text prompt leads a world model's rollout (docs/synth.md, "Changes").
+  double change_at = 0, change_lead = 1.0;
+  std::string change_weather, change_time_of_day;
 };
 
 // Fills empty district / weather / time_of_day / scene deterministically from (seed, index) and checks the
 // rest; throws gaia::Error naming an unknown value.
 SceneSpec resolve_spec(SceneSpec spec);
+// The change part of resolve_spec: checks change_at and change_lead, draws "random" targets (the rest resolved).
+SceneSpec resolve_change(SceneSpec spec);
 
 enum class VehicleKind { Car, Van, Bus, Truck };
 const char* vehicle_name(VehicleKind k);
@@ -116,6 +124,11 @@ class Scene {
   const Road& road() const { return road_; }
   int64_t frame() const { return frame_; }
   double time() const { return static_cast<double>(frame_) / spec_.fps; }
+  // The conditions the current frame is drawn and labelled under (the spec's, or its change's once reached), and
+  // the ones its caption names (the change's from change_lead seconds before it).
+  const std::string& weather() const;
+  const std::string& time_of_day() const;
+  bool caption_changed() const;
   const Ego& ego() const { return ego_; }
   const std::vector<Vehicle>& vehicles() const { return vehicles_; }
   const std::vector<Pedestrian>& pedestrians() const { return peds_; }

@@ -30,6 +30,10 @@ SceneSpec spec_from(const SynthOptions& o, int index) {
   s.seconds = o.seconds;
   s.wander = o.wander;
   s.swerve = o.swerve;
+  s.change_at = o.change_at;
+  s.change_lead = o.change_lead;
+  s.change_weather = o.change_weather;
+  s.change_time_of_day = o.change_time_of_day;
   return resolve_spec(s);
 }
 
@@ -81,6 +85,12 @@ data::EpisodeMeta Simulator::meta() const {
   if (s.wander > 0) m.extra["synth_wander"] = fmt::format("{}", s.wander);
   if (s.swerve > 0) m.extra["synth_swerve"] = fmt::format("{}", s.swerve);
   m.extra["synth_district"] = s.district;
+  if (s.change_at > 0) {  // the episode's weather and time_of_day are its start's; the frames' labels follow the change
+    m.extra["synth_change_at"] = fmt::format("{}", s.change_at);
+    m.extra["synth_change_lead"] = fmt::format("{}", s.change_lead);
+    m.extra["synth_change_weather"] = s.change_weather;
+    m.extra["synth_change_time_of_day"] = s.change_time_of_day;
+  }
   m.extra["district"] = s.district;
   m.extra["lanes"] = std::to_string(world_->layout().lanes_fwd);
   return m;
@@ -100,8 +110,13 @@ data::FrameRecord Simulator::record(const ActionStep& a, bool with_image) {
   f.curvature = static_cast<float>(a.curvature);
   f.labels = world_->labels(a);
   const SceneSpec& s = world_->spec();
-  f.caption = make_caption(f.labels, stream_key(s.seed, static_cast<uint64_t>(s.index), "caption",
-                                                static_cast<uint64_t>(world_->frame())));
+  nlohmann::json said = f.labels;  // what the caption names: the change's conditions from change_lead before it
+  if (world_->caption_changed()) {
+    if (!s.change_weather.empty()) said["weather"] = s.change_weather;
+    if (!s.change_time_of_day.empty()) said["time_of_day"] = s.change_time_of_day;
+  }
+  f.caption = make_caption(said, stream_key(s.seed, static_cast<uint64_t>(s.index), "caption",
+                                            static_cast<uint64_t>(world_->frame())));
   return f;
 }
 
@@ -142,6 +157,12 @@ data::EpisodeMeta replay(const data::Episode& original, int64_t from, const std:
     o.wander = parse_double(w->second, where.string() + ": synth_wander");
   if (auto w = m.extra.find("synth_swerve"); w != m.extra.end())
     o.swerve = parse_double(w->second, where.string() + ": synth_swerve");
+  if (auto c = m.extra.find("synth_change_at"); c != m.extra.end()) {
+    o.change_at = parse_double(c->second, where.string() + ": synth_change_at");
+    o.change_lead = parse_double(need(m, "synth_change_lead", where), where.string() + ": synth_change_lead");
+    o.change_weather = need(m, "synth_change_weather", where);
+    o.change_time_of_day = need(m, "synth_change_time_of_day", where);
+  }
   o.overwrite = overwrite;
   // A replay starts mid-drive, so its recorded actions cannot rebuild the world from the start: replay its source.
   if (m.is_replay())

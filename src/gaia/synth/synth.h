@@ -28,6 +28,8 @@ struct SynthOptions {
   std::string frame_codec = "raw";
   double wander = 0;                 // the driver's lateral wander in its lane, m (SceneSpec::wander)
   double swerve = 0;                 // the largest curvature of the driver's open-loop swerves, 1/m (SceneSpec::swerve)
+  double change_at = 0, change_lead = 1.0;           // a change of conditions mid-drive (SceneSpec::change_at)
+  std::string change_weather, change_time_of_day;  // its targets: a value, "random" or "" (kept)
   bool overwrite = false;            // replace an existing episode with the same id
 };
 

@@ -19,7 +19,9 @@ struct WorldBatch {
   torch::Tensor text_emb;    // [B, T, m, text_dim] float32 precomputed text embeddings (e.g. T5), or undefined
   torch::Tensor use_action;  // [B] bool: false -> null action tokens for the whole example (undefined = all true)
   torch::Tensor use_text;    // [B] bool: false -> null text tokens (undefined = all true)
-  torch::Tensor procedural;  // [B] bool: the window is of a drive gaia synth rendered (or its mirror or replay)
+  // [B] bool: the window is of a drive gaia synth rendered (or its mirror or replay) under conditions that hold
+  // throughout: what --distill-procedural-only holds to the teacher
+  torch::Tensor procedural;
 
   int64_t batch() const { return tokens.size(0); }
   int64_t steps() const { return tokens.size(1); }

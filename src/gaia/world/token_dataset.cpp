@@ -392,7 +392,8 @@ WorldBatch TokenDataset::make_batch(const std::vector<Window>& windows, const Te
     Conditioning c = mix.draw(rng, meta(w.episode).is_replay());
     ua[b] = c == Conditioning::kAction;
     ut[b] = c == Conditioning::kText;
-    procedural[b] = meta(w.episode).is_procedural();
+    // A change of conditions (synth --change-at) is new to a teacher of the procedural world: not held to it.
+    procedural[b] = meta(w.episode).is_procedural() && !meta(w.episode).extra.count("synth_change_at");
   }
   WorldBatch out;
   out.tokens = tokens;
