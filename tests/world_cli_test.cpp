@@ -690,6 +690,28 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
     EXPECT_LE(w["copy_rate"].get<double>(), 1.0);
   }
 
+  // --text-from-prompts: text control continues held-out procedural daytime drives, prompting only weather and time
+  // of day (a drive's traffic lights are its own), and reads back the generated frames.
+  const fs::path daytime = p.dir / "daytime-tokens";  // the tiny drives, every one of them by day
+  fs::remove_all(daytime);
+  fs::copy(p.tokens, daytime, fs::copy_options::recursive);
+  for (auto& e : fs::directory_iterator(daytime / "episodes")) {
+    auto m = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    m["time_of_day"] = "day";
+    write_file_atomic(e.path() / "episode.json", m.dump(2));
+  }
+  r = test::run_gaia("eval " + q(daytime) + " --world " + q(p.trained) + " --tokenizer " + q(p.tok / "tokenizer.safetensors") +
+                     " --dynamics-probe " + q(models / "probe-dynamics.safetensors") + " --scene-probe " +
+                     q(models / "probe-scene.safetensors") + p.tiny() + " --only text --text-from-prompts --prompt-frames 2 --text-frames 1 --futures 2 --scales 2 --out " +
+                     q(p.dir / "eval-text-prompted"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto tp = nlohmann::json::parse(read_file(p.dir / "eval-text-prompted" / "eval.json"))["text_control"];
+  EXPECT_EQ(tp["prompt_frames"].get<int>(), 2);
+  EXPECT_EQ(tp["targets"].get<int>(), 7);  // 4 weathers and 3 times of day
+  ASSERT_EQ(tp["prompt_episodes"].size(), 2u);
+  for (const auto& id : tp["prompt_episodes"]) EXPECT_EQ(id.get<std::string>().rfind("synth-", 0), 0u) << id;
+  for (const auto& row : tp["runs"]) EXPECT_FALSE(row["per_target"].contains("red")) << row.dump();
+
   // The steering response curve: the sweep's commands replace the default ones, each with its own read-back.
   r = test::run_gaia(base + " --only action --commands sweep --prompts 1 --prompt-frames 2 --frames " + std::to_string(K - 1) +
                      " --out " + q(p.dir / "eval-sweep"));

@@ -70,6 +70,10 @@ void register_eval(CLI::App& app) {
                   "and with the schedules)")
       ->delimiter(',')
       ->check(key_range("world.guidance_scale"));
+  auto text_from_prompts = std::make_shared<bool>(false);
+  cmd->add_flag("--text-from-prompts", *text_from_prompts,
+                "text control continues held-out daytime drives of --prompt-footage (--prompt-frames steps) under each "
+                "weather and time-of-day prompt instead of generating from nothing; --prompt-footage real always does");
   cmd->add_option("--long-seconds", e->long_seconds, "length of the long rollout (sliding window)")->check(number_in({0, 1e6, true, false}));
   cmd->add_option("--window-seconds", e->window_seconds, "statistics window of the long rollout")->check(number_in({0, 1e6, true, false}));
   cmd->add_option("--long-rollouts", e->long_rollouts,
@@ -127,7 +131,10 @@ void register_eval(CLI::App& app) {
     o.text.scales = e->scales;
     o.text.sampling = sampling;
     o.text.seed = uint64_t(run.run.seed);
-    if (o.action.footage == world::Footage::kReal) o.text.real_prompt_frames = e->prompt_frames;
+    if (o.action.footage == world::Footage::kReal || *text_from_prompts) {  // text steering a scene in view
+      o.text.prompt_frames = e->prompt_frames;
+      o.text.prompt_footage = o.action.footage;
+    }
     o.rollouts.prompts = e->prompts;
     o.rollouts.prompt_frames = e->prompt_frames;
     o.rollouts.frames = e->frames;

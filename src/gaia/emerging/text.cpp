@@ -79,7 +79,7 @@ nlohmann::json real_decoded_accuracy(Models& m, const world::TokenDataset& ds, c
 }
 
 nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, const world::TokenDataset* real) {
-  const int64_t P = o.real_prompt_frames;
+  const int64_t P = o.prompt_frames;
   std::vector<TextTarget> targets;
   for (const auto& t : text_targets())
     if (P == 0 || t.attribute < 2) targets.push_back(t);  // a recorded drive's traffic lights are not labelled
@@ -93,8 +93,8 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
   nlohmann::json j;
   if (P > 0) {
     // Row r: target r / futures from held-out daytime prompt r % futures, with its recorded actions, then none.
-    if (!real) fail("text control from real prompts needs the token dataset");
-    auto pr = held_out_prompts(*real, o.futures, P, P + F, m.info.config.run.seed, Footage::kReal,
+    if (!real) fail("text control from prompts needs the token dataset");
+    auto pr = held_out_prompts(*real, o.futures, P, P + F, m.info.config.run.seed, o.prompt_footage,
                                [&](size_t e) { return real->meta(e).time_of_day == "day"; });
     p.tokens = pr.tokens.repeat({G, 1, 1});
     p.actions = torch::full({N, P + F, 2}, std::nan(""));
@@ -201,10 +201,10 @@ nlohmann::json text_control(Models& m, const TextEvalOptions& o, Output& out, co
   out.gif("videos/text_prompts.gif", video, 3.0);
   out.sections.push_back(
       {{"title", "Text control"},
-       {"text", P > 0 ? fmt::format("Held-out recorded daytime drives ({} frames each) continued under a text prompt "
+       {"text", P > 0 ? fmt::format("Held-out {} daytime drives ({} frames each) continued under a text prompt "
                                     "({} prompts x {} futures x {} frames); the scene probe reads the prompted "
                                     "attribute back from every generated frame.",
-                                    P, G, o.futures, F)
+                                    o.prompt_footage == Footage::kReal ? "recorded" : "procedural", P, G, o.futures, F)
                       : fmt::format("Scenes generated from a text prompt alone ({} prompts x {} futures x {} frames); "
                                     "the scene probe reads the prompted attribute back from every decoded frame.",
                                     G, o.futures, F)},

@@ -19,9 +19,11 @@ std::vector<TextTarget> text_targets();
 struct TextEvalOptions {
   int futures = 4;                                   // rollouts per target and setting
   int frames = 4;                                    // generated (from scratch, or after a real prompt)
-  // > 0: each rollout starts from this many steps of a held-out recorded daytime drive of the token dataset, and
-  // only weather and time of day are prompted: text steering a real scene. 0: from scratch (the paper's Fig. 8).
-  int real_prompt_frames = 0;
+  // > 0: each rollout starts from this many steps of a held-out daytime drive of the token dataset, of
+  // prompt_footage, and only weather and time of day are prompted: text steering a scene in view. 0: from scratch
+  // (the paper's Fig. 8).
+  int prompt_frames = 0;
+  Footage prompt_footage = Footage::kReal;
   // Guidance scales s; the last one also runs with the negative prompt and with the schedules. The range reaches
   // past the scales where text control usually saturates, so the curve shows where it stops rising.
   std::vector<double> scales{0.0, 1.0, 2.0, 4.0, 8.0};
