@@ -47,6 +47,38 @@ int TrafficLight::state(double t) const {
   return c < green ? 0 : c < green + amber ? 1 : 2;
 }
 
+namespace {
+
+// The change part of resolve_spec: checks change_at and change_lead, draws "random" targets (the rest resolved).
+SceneSpec resolve_change(SceneSpec spec) {
+  const bool asked = !spec.change_weather.empty() || !spec.change_time_of_day.empty();
+  if (spec.change_at == 0) {
+    if (asked) fail("synth: a change of weather or time of day needs its time (--change-at)");
+    return spec;
+  }
+  if (!(spec.change_at > 0 && spec.change_at < spec.seconds))
+    fail("synth: --change-at must be within the drive's (0, {}) s, got {}", spec.seconds, spec.change_at);
+  if (!(spec.change_lead >= 0 && spec.change_lead <= spec.change_at))
+    fail("synth: --change-lead must be in [0, --change-at = {}] s, got {}", spec.change_at, spec.change_lead);
+  if (!asked) fail("synth: --change-at {} s changes nothing: give --change-weather or --change-time", spec.change_at);
+  Rng r(stream_key(spec.seed, static_cast<uint64_t>(spec.index), "change"));
+  auto other = [&](const auto& values, const std::string& own) {  // uniform over the values other than `own`
+    std::vector<std::string> rest;
+    for (const char* v : values)
+      if (own != v) rest.push_back(v);
+    return rest[static_cast<size_t>(r.integer(0, static_cast<int>(rest.size()) - 1))];
+  };
+  if (spec.change_weather == "random") spec.change_weather = other(kWeathers, spec.weather);
+  if (spec.change_time_of_day == "random") spec.change_time_of_day = other(kTimesOfDay, spec.time_of_day);
+  if (!spec.change_weather.empty() && weather_index(spec.change_weather) < 0)
+    fail("synth: unknown --change-weather '{}' (clear, overcast, rain, fog, snow, random)", spec.change_weather);
+  if (!spec.change_time_of_day.empty() && time_index(spec.change_time_of_day) < 0)
+    fail("synth: unknown --change-time '{}' (day, dusk, night, random)", spec.change_time_of_day);
+  return spec;
+}
+
+}  // namespace
+
 SceneSpec resolve_spec(SceneSpec spec) {
   if (!(spec.fps > 0 && spec.fps <= 1000)) fail("synth: fps must be in (0, 1000], got {}", spec.fps);
   if (!(spec.seconds > 0 && spec.seconds <= 3600)) fail("synth: seconds must be in (0, 3600], got {}", spec.seconds);
@@ -83,32 +115,6 @@ SceneSpec resolve_spec(SceneSpec spec) {
   return resolve_change(spec);
 }
 
-SceneSpec resolve_change(SceneSpec spec) {
-  const bool asked = !spec.change_weather.empty() || !spec.change_time_of_day.empty();
-  if (spec.change_at == 0) {
-    if (asked) fail("synth: a change of weather or time of day needs its time (--change-at)");
-    return spec;
-  }
-  if (!(spec.change_at > 0 && spec.change_at < spec.seconds))
-    fail("synth: --change-at must be within the drive's (0, {}) s, got {}", spec.seconds, spec.change_at);
-  if (!(spec.change_lead >= 0 && spec.change_lead <= spec.change_at))
-    fail("synth: --change-lead must be in [0, --change-at = {}] s, got {}", spec.change_at, spec.change_lead);
-  if (!asked) fail("synth: --change-at {} s changes nothing: give --change-weather or --change-time", spec.change_at);
-  Rng r(stream_key(spec.seed, static_cast<uint64_t>(spec.index), "change"));
-  auto other = [&](const auto& values, const std::string& own) {  // uniform over the values other than `own`
-    std::vector<std::string> rest;
-    for (const char* v : values)
-      if (own != v) rest.push_back(v);
-    return rest[static_cast<size_t>(r.integer(0, static_cast<int>(rest.size()) - 1))];
-  };
-  if (spec.change_weather == "random") spec.change_weather = other(kWeathers, spec.weather);
-  if (spec.change_time_of_day == "random") spec.change_time_of_day = other(kTimesOfDay, spec.time_of_day);
-  if (!spec.change_weather.empty() && weather_index(spec.change_weather) < 0)
-    fail("synth: unknown --change-weather '{}' (clear, overcast, rain, fog, snow, random)", spec.change_weather);
-  if (!spec.change_time_of_day.empty() && time_index(spec.change_time_of_day) < 0)
-    fail("synth: unknown --change-time '{}' (day, dusk, night, random)", spec.change_time_of_day);
-  return spec;
-}
 
 Scene::Scene(const SceneSpec& s)
     : spec_(s),

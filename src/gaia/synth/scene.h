@@ -52,8 +52,6 @@ struct SceneSpec {
 // Fills empty district / weather / time_of_day / scene deterministically from (seed, index) and checks the
 // rest; throws gaia::Error naming an unknown value.
 SceneSpec resolve_spec(SceneSpec spec);
-// The change part of resolve_spec: checks change_at and change_lead, draws "random" targets (the rest resolved).
-SceneSpec resolve_change(SceneSpec spec);
 
 enum class VehicleKind { Car, Van, Bus, Truck };
 const char* vehicle_name(VehicleKind k);
