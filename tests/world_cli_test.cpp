@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <sstream>
 
 #include "gaia/core/npy.h"
@@ -55,6 +56,17 @@ struct Pipeline {
   }
   static std::string tiny() { return " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1"; }
 };
+
+// A copy of the token dataset `from` at `to` (replaced), each episode's metadata passed through `edit`.
+void copy_tokens_with(const fs::path& from, const fs::path& to, const std::function<void(nlohmann::json&)>& edit) {
+  fs::remove_all(to);
+  fs::copy(from, to, fs::copy_options::recursive);
+  for (auto& e : fs::directory_iterator(to / "episodes")) {
+    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+    edit(j);
+    write_file_atomic(e.path() / "episode.json", j.dump(2));
+  }
+}
 
 }  // namespace
 
@@ -374,23 +386,13 @@ TEST(WorldCli, DistilsOnlyProceduralWindowsWhenAsked) {
   auto& p = Pipeline::get();
   // The same tokens as recorded footage: only their episodes' source differs.
   const fs::path recorded = p.dir / "recorded-tokens";
-  fs::remove_all(recorded);
-  fs::copy(p.tokens, recorded, fs::copy_options::recursive);
-  for (auto& e : fs::directory_iterator(recorded / "episodes")) {
-    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
-    j["source"] = "dashcam.mp4";
-    write_file_atomic(e.path() / "episode.json", j.dump(2));
-  }
+  copy_tokens_with(p.tokens, recorded, [](nlohmann::json& j) { j["source"] = "dashcam.mp4"; });
   // ... and as procedural drives whose conditions change (synth --change-at): new to the teacher too.
   const fs::path changing = p.dir / "changing-tokens";
-  fs::remove_all(changing);
-  fs::copy(p.tokens, changing, fs::copy_options::recursive);
-  for (auto& e : fs::directory_iterator(changing / "episodes")) {
-    auto j = nlohmann::json::parse(read_file(e.path() / "episode.json"));
+  copy_tokens_with(p.tokens, changing, [](nlohmann::json& j) {
     ASSERT_EQ(j["source"].get<std::string>().rfind("synth:", 0), 0u) << j["source"];
     j["extra"]["synth_change_at"] = "2";
-    write_file_atomic(e.path() / "episode.json", j.dump(2));
-  }
+  });
   const std::string base = p.tiny() + " --init " + q(p.trained) + " --distill-from " + q(p.trained) +
                            " --set world.lr=1e-2 --set world.warmup_steps=0 --set world.p_action=0.2 --set world.p_text=0.6 --steps 4"
                            " --val-every 100";
@@ -693,13 +695,7 @@ TEST(EvalCli, MeasuresControlFuturesAndLongRolloutsAndWritesTheReport) {
   // --text-from-prompts: text control continues held-out procedural daytime drives, prompting only weather and time
   // of day (a drive's traffic lights are its own), and reads back the generated frames.
   const fs::path daytime = p.dir / "daytime-tokens";  // the tiny drives, every one of them by day
-  fs::remove_all(daytime);
-  fs::copy(p.tokens, daytime, fs::copy_options::recursive);
-  for (auto& e : fs::directory_iterator(daytime / "episodes")) {
-    auto m = nlohmann::json::parse(read_file(e.path() / "episode.json"));
-    m["time_of_day"] = "day";
-    write_file_atomic(e.path() / "episode.json", m.dump(2));
-  }
+  copy_tokens_with(p.tokens, daytime, [](nlohmann::json& j) { j["time_of_day"] = "day"; });
   r = test::run_gaia("eval " + q(daytime) + " --world " + q(p.trained) + " --tokenizer " + q(p.tok / "tokenizer.safetensors") +
                      " --dynamics-probe " + q(models / "probe-dynamics.safetensors") + " --scene-probe " +
                      q(models / "probe-scene.safetensors") + p.tiny() + " --only text --text-from-prompts --prompt-frames 2 --text-frames 1 --futures 2 --scales 2 --out " +
