@@ -110,13 +110,17 @@ data::FrameRecord Simulator::record(const ActionStep& a, bool with_image) {
   f.curvature = static_cast<float>(a.curvature);
   f.labels = world_->labels(a);
   const SceneSpec& s = world_->spec();
-  nlohmann::json said = f.labels;  // what the caption names: the change's conditions from change_lead before it
+  // What the caption names: the labels, or the change's conditions from change_lead before it (a copy only then).
+  nlohmann::json said;
+  const nlohmann::json* named = &f.labels;
   if (world_->caption_changed()) {
+    said = f.labels;
     if (!s.change_weather.empty()) said["weather"] = s.change_weather;
     if (!s.change_time_of_day.empty()) said["time_of_day"] = s.change_time_of_day;
+    named = &said;
   }
-  f.caption = make_caption(said, stream_key(s.seed, static_cast<uint64_t>(s.index), "caption",
-                                            static_cast<uint64_t>(world_->frame())));
+  f.caption = make_caption(*named, stream_key(s.seed, static_cast<uint64_t>(s.index), "caption",
+                                              static_cast<uint64_t>(world_->frame())));
   return f;
 }
 
