@@ -25,6 +25,10 @@ constexpr int kMinTracks = 20;          // fewer tracked corners than this: the 
 constexpr int kMinInliers = 30;         // fewer epipolar inliers: no consistent rigid motion
 constexpr int kMinRoadPoints = 8;       // triangulated points on the fitted road plane
 constexpr double kStillFlowPx = 0.15;   // median track motion (working pixels) below which the car stands
+constexpr double kFixedFlowPx = 0.3;    // a track moving less than this (working pixels) is left out of the geometry
+constexpr int kFixedCell = 8;           // working pixels a side of the cells that vote on being fixed to the camera
+constexpr double kFixedVotes = 4;       // net votes that leave a cell out of the corner search
+constexpr double kFixedFade = 0.98;     // the votes' decay per pair
 constexpr double kMaxRoadTilt = 0.45;   // rad: the road plane's normal within this of the camera's down axis
 constexpr double kMinForward = 0.8;     // |t_z| of the unit translation: the camera moves mostly forward
 constexpr double kRoadTolerance = 0.06; // a point is on the plane within this share of the camera's height
@@ -135,7 +139,7 @@ void MotionEstimator::add(const cv::Mat& bgr, double time_s) {
   seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Mat& cur, double dt) const {
+MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Mat& cur, double dt) {
   Pair out{kNaN, kNaN, 0.0, ""};
   const double f = focal_for(camera_, opt_, prev.cols);
   const double sx = double(prev.cols) / camera_.width, sy = double(prev.rows) / camera_.height;
@@ -147,10 +151,17 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
   // Corners over the whole frame, and as many again below the horizon with a lower bar: the road surface is
   // weakly textured, and its points set the scale.
   const double spacing = std::max(4.0, prev.cols / 160.0);
-  cv::goodFeaturesToTrack(prev, p0, opt_.max_features / 2, 0.005, spacing);
+  if (fixed_votes_.empty())
+    fixed_votes_ = cv::Mat::zeros((prev.rows + kFixedCell - 1) / kFixedCell, (prev.cols + kFixedCell - 1) / kFixedCell,
+                                  CV_32F);
+  cv::Mat search;  // 255 where corners are looked for: every cell not yet found fixed to the camera
+  cv::resize(fixed_votes_ < kFixedVotes, search, cv::Size(fixed_votes_.cols * kFixedCell, fixed_votes_.rows * kFixedCell),
+             0, 0, cv::INTER_NEAREST);
+  search = search(cv::Rect(0, 0, prev.cols, prev.rows)).clone();
+  cv::goodFeaturesToTrack(prev, p0, opt_.max_features / 2, 0.005, spacing, search);
   cv::Mat below = cv::Mat::zeros(prev.size(), CV_8U);
   below.rowRange(std::min(prev.rows - 1, int(cy + 0.05 * prev.rows)), prev.rows).setTo(255);
-  cv::goodFeaturesToTrack(prev, low, opt_.max_features / 2, 0.001, spacing, below);
+  cv::goodFeaturesToTrack(prev, low, opt_.max_features / 2, 0.001, spacing, below & search);
   p0.insert(p0.end(), low.begin(), low.end());
   if (int(p0.size()) < kMinTracks) {
     out.reason = "too few tracks";
@@ -173,31 +184,64 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
     out.reason = "too few tracks";
     return out;
   }
-  // Nothing moves, not even the fastest fifth of the tracks (a visible hood never moves): standing still.
+  // Nothing moves, not even the fastest fifth of the tracks: the car stands, unless the tracks that do move show the
+  // camera going forward. Corners fixed to the camera (a hood, a watermark, a timestamp, raindrops on the screen)
+  // never move; where they are most of the tracks they would read as standing still and outvote the road in the
+  // essential matrix, and where the car moves they say nothing of how: the motion is measured on the moving tracks.
   std::vector<double> sorted = flow;
   std::sort(sorted.begin(), sorted.end());
-  if (sorted[sorted.size() * 4 / 5] < kStillFlowPx) {
+  const bool mostly_still = sorted[sorted.size() * 4 / 5] < kStillFlowPx;
+  auto standing_still = [&] {
     out.speed = 0;
     out.yaw_rate = 0;
     out.confidence = 0.5;
     out.reason = "standing still";
     return out;
+  };
+  {
+    std::vector<cv::Point2f> ma, mb;
+    std::vector<double> mflow;
+    for (size_t i = 0; i < a.size(); ++i)
+      if (flow[i] >= kFixedFlowPx) {
+        ma.push_back(a[i]);
+        mb.push_back(b[i]);
+        mflow.push_back(flow[i]);
+      }
+    // Where the car moves, still corners vote their cells fixed and moving ones vote them free; old votes fade, so a
+    // far point that stood on a straight road is looked at again.
+    fixed_votes_ *= kFixedFade;
+    if (!mostly_still && int(ma.size()) >= kMinInliers)
+      for (size_t i = 0; i < a.size(); ++i) {
+        float& v = fixed_votes_.at<float>(int(a[i].y) / kFixedCell, int(a[i].x) / kFixedCell);
+        v = flow[i] >= kFixedFlowPx ? std::max(0.0f, v - 2) : std::min(v + 1, 2 * float(kFixedVotes));
+      }
+    if (int(ma.size()) < kMinInliers) {
+      if (mostly_still) return standing_still();
+      out.reason = "no consistent motion";
+      return out;
+    }
+    a.swap(ma);
+    b.swap(mb);
+    flow.swap(mflow);
   }
   cv::Mat inl;
   cv::Mat E = cv::findEssentialMat(a, b, K, cv::RANSAC, 0.999, 1.0, inl);
   if (E.rows != 3 || E.cols != 3) {
+    if (mostly_still) return standing_still();
     out.reason = "no consistent motion";
     return out;
   }
   cv::Mat R, t;
   const int inliers = cv::recoverPose(E, a, b, K, R, t, inl);
   if (inliers < kMinInliers) {
+    if (mostly_still) return standing_still();
     out.reason = "no consistent motion";
     return out;
   }
   // A car moves along its camera's axis: a translation mostly sideways or vertical is a wrong pose (fog, glare,
   // a scene of one far plane), not a motion to report.
   if (std::abs(t.at<double>(2)) < kMinForward) {
+    if (mostly_still) return standing_still();
     out.reason = "no consistent motion";
     return out;
   }

@@ -5,7 +5,9 @@
 //
 // Each frame with the latest one at least baseline_s before it, at their recorded resolution (halved while wider
 // than max_width):
-//   1. corners (Shi-Tomasi) tracked by pyramidal Lucas-Kanade, kept when the backward track returns within a pixel
+//   1. corners (Shi-Tomasi) tracked by pyramidal Lucas-Kanade, kept when the backward track returns within a pixel;
+//      corners that stay still while the car moves are fixed to the camera, left out of the geometry and, once they
+//      have stood still in several pairs, out of the corner search
 //   2. essential matrix with RANSAC, recoverPose: the rotation gives the yaw rate without any scale
 //   3. inlier tracks below the horizon triangulated with the unit-length translation; a plane fitted to them with
 //      RANSAC is the road, and its distance from the camera, against the true camera height, gives the scale
@@ -68,7 +70,7 @@ class MotionEstimator {
     std::string reason;
     double t_mid = 0;  // the middle of the two frames' times
   };
-  Pair measure(const cv::Mat& prev, const cv::Mat& cur, double dt) const;
+  Pair measure(const cv::Mat& prev, const cv::Mat& cur, double dt);
 
   CameraIntrinsics camera_;
   MotionOptions opt_;
@@ -76,6 +78,9 @@ class MotionEstimator {
   std::vector<std::pair<double, cv::Mat>> recent_;  // (time, grey frame) back to baseline_s before the newest
   std::vector<double> times_;
   std::vector<Pair> pairs_;
+  // Per cell of the working frame, how often its corners stood still while the car moved: cells fixed to the camera
+  // (a watermark, a timestamp, raindrops, the hood) are left out of the corner search, whose budget is the scene's.
+  cv::Mat fixed_votes_;
   double seconds_ = 0;
 };
 
