@@ -24,17 +24,18 @@ using namespace gaia::data;
 
 namespace {
 
-// A drive of the procedural world rendered in memory, with its true actions (frame i: the action from i to i+1).
+// A drive of the procedural world rendered in memory, with its true actions (frame i: the action from i to i+1);
+// with an overlay, also the estimate on the same frames drawn over.
 struct Drive {
-  MotionEstimate est;
+  MotionEstimate est, est_overlaid;
   std::vector<double> speed, curvature;
 };
 
-Drive synth_drive(const std::string& scene, uint64_t seed, double seconds, int h = 288, int w = 512,
+Drive synth_drive(const std::string& scene, uint64_t seed, double seconds,
                   const std::function<void(cv::Mat&)>& overlay = {}) {
   synth::SynthOptions o;
-  o.height = h;
-  o.width = w;
+  o.height = 288;
+  o.width = 512;
   o.seconds = seconds;
   o.seed = seed;
   o.scene = scene;
@@ -44,19 +45,23 @@ Drive synth_drive(const std::string& scene, uint64_t seed, double seconds, int h
   MotionOptions mo;
   mo.camera_height = synth::CameraModel{}.height;
   mo.hfov_deg = synth::CameraModel{}.hfov_deg;
-  MotionEstimator est({}, mo);
+  MotionEstimator est({}, mo), over({}, mo);
   Drive d;
   const int n = int(std::lround(seconds * o.fps));
   for (int i = 0; i < n; ++i) {
     const auto a = sim.policy();
     cv::Mat frame = sim.render();
-    if (overlay) overlay(frame);
     est.add(frame, i / o.fps);
+    if (overlay) {
+      overlay(frame);
+      over.add(frame, i / o.fps);
+    }
     d.speed.push_back(a.speed);
     d.curvature.push_back(a.curvature);
     sim.step(a);
   }
   d.est = est.finish();
+  if (overlay) d.est_overlaid = over.finish();
   return d;
 }
 
@@ -84,48 +89,37 @@ void car_fixed_overlay(cv::Mat& f) {
 
 }  // namespace
 
-TEST(MotionSlow, ProceduralDrivesSpeedAndTurnDirection) {
-  std::vector<double> ev, ek, tv, tk;
+// The targets for the estimate on drives of the evaluation size; and the same drives with corners fixed to the
+// camera, which never move while the road does: they must not read as standing still, nor outvote the road in the
+// essential matrix.
+TEST(MotionSlow, ProceduralDrivesSpeedAndTurnDirectionWithAndWithoutAWatermark) {
+  std::vector<double> ev, ek, ov, ok, tv, tk;
   // Town drives: the procedural world's roads are textured enough there (its open country roads are flat colour,
   // where the estimate says "no road plane" rather than guess).
   for (uint64_t seed : {1, 4}) {
-    const Drive d = synth_drive("bend", seed, 6.0);
+    const Drive d = synth_drive("bend", seed, 6.0, car_fixed_overlay);
     ev.insert(ev.end(), d.est.speed.begin(), d.est.speed.end());
     ek.insert(ek.end(), d.est.curvature.begin(), d.est.curvature.end());
+    ov.insert(ov.end(), d.est_overlaid.speed.begin(), d.est_overlaid.speed.end());
+    ok.insert(ok.end(), d.est_overlaid.curvature.begin(), d.est_overlaid.curvature.end());
     tv.insert(tv.end(), d.speed.begin(), d.speed.end());
     tk.insert(tk.end(), d.curvature.begin(), d.curvature.end());
   }
   const auto g = compare_motion(ev, ek, tv, tk);
-  // The targets for the estimate, on drives of the evaluation size.
   EXPECT_GT(g.frames, 200) << g.summary();
   EXPECT_LT(g.median_speed_rel_error, 0.1) << g.summary();
   EXPECT_GT(g.curvature_frames, 50) << g.summary();
   EXPECT_GT(g.curvature_sign_agreement, 0.95) << g.summary();
   EXPECT_LT(g.yaw_rate_mae, 0.01) << g.summary();
-}
 
-// Corners fixed to the camera never move while the road does: they must not read as standing still, nor outvote
-// the road in the essential matrix.
-TEST(MotionSlow, WatermarkDropsAndDashboardDoNotHideTheMotion) {
-  std::vector<double> ev, ek, tv, tk;
-  int64_t clean_frames = 0;
-  for (uint64_t seed : {1, 4}) {
-    const Drive c = synth_drive("bend", seed, 6.0);
-    clean_frames += c.est.frames_with_speed();
-    const Drive d = synth_drive("bend", seed, 6.0, 288, 512, car_fixed_overlay);
-    ev.insert(ev.end(), d.est.speed.begin(), d.est.speed.end());
-    ek.insert(ek.end(), d.est.curvature.begin(), d.est.curvature.end());
-    tv.insert(tv.end(), d.speed.begin(), d.speed.end());
-    tk.insert(tk.end(), d.curvature.begin(), d.curvature.end());
-  }
-  const auto g = compare_motion(ev, ek, tv, tk);
-  std::printf("with the overlay: %s (clean: %lld frames with a speed)\n", g.summary().c_str(), (long long)clean_frames);
-  // Corners fixed to the camera left in the geometry cost more than half of the clean drives' frames, a 30% speed
-  // error and twice the yaw-rate error.
-  EXPECT_GT(g.frames, clean_frames * 4 / 10) << g.summary();
-  EXPECT_LT(g.median_speed_rel_error, 0.2) << g.summary();
-  EXPECT_GT(g.curvature_sign_agreement, 0.95) << g.summary();
-  EXPECT_LT(g.yaw_rate_mae, 0.008) << g.summary();
+  // Left in the geometry, the fixed corners cost most of the frames and pull the speed and yaw rate off: these bounds
+  // fail then.
+  const auto f = compare_motion(ov, ok, tv, tk);
+  std::printf("clean: %s\nwith the overlay: %s\n", g.summary().c_str(), f.summary().c_str());
+  EXPECT_GT(f.frames, g.frames * 35 / 100) << f.summary();
+  EXPECT_LT(f.median_speed_rel_error, 0.2) << f.summary();
+  EXPECT_GT(f.curvature_sign_agreement, 0.95) << f.summary();
+  EXPECT_LT(f.yaw_rate_mae, 0.008) << f.summary();
 }
 
 TEST(Motion, StillAndBlankFramesSayWhy) {

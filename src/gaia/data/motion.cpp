@@ -185,7 +185,7 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
     return out;
   }
   // Nothing moves, not even the fastest fifth of the tracks: the car stands, unless the tracks that do move show the
-  // camera going forward. Corners fixed to the camera (a hood, a watermark, a timestamp, raindrops on the screen)
+  // camera going forward over the road (people walking past a standing car do not). Corners fixed to the camera (a hood, a watermark, a timestamp, raindrops on the screen)
   // never move; where they are most of the tracks they would read as standing still and outvote the road in the
   // essential matrix, and where the car moves they say nothing of how: the motion is measured on the moving tracks.
   std::vector<double> sorted = flow;
@@ -198,6 +198,8 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
     out.reason = "standing still";
     return out;
   };
+  const std::vector<cv::Point2f> all = a;  // every track, for the votes on cells fixed to the camera
+  const std::vector<double> all_flow = flow;
   {
     std::vector<cv::Point2f> ma, mb;
     std::vector<double> mflow;
@@ -206,14 +208,6 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
         ma.push_back(a[i]);
         mb.push_back(b[i]);
         mflow.push_back(flow[i]);
-      }
-    // Where the car moves, still corners vote their cells fixed and moving ones vote them free; old votes fade, so a
-    // far point that stood on a straight road is looked at again.
-    fixed_votes_ *= kFixedFade;
-    if (!mostly_still && int(ma.size()) >= kMinInliers)
-      for (size_t i = 0; i < a.size(); ++i) {
-        float& v = fixed_votes_.at<float>(int(a[i].y) / kFixedCell, int(a[i].x) / kFixedCell);
-        v = flow[i] >= kFixedFlowPx ? std::max(0.0f, v - 2) : std::min(v + 1, 2 * float(kFixedVotes));
       }
     if (int(ma.size()) < kMinInliers) {
       if (mostly_still) return standing_still();
@@ -284,11 +278,20 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
   double d = road_distance(road_points(0.4), &support);
   if (std::isnan(d)) d = road_distance(road_points(0.5), &support);
   if (std::isnan(d)) {
+    if (mostly_still) return standing_still();
     out.reason = "no road plane";
     out.confidence = 0.25 * inlier_share;
     return out;
   }
   out.speed = opt_.camera_height / d / dt;  // |t| = 1 in the triangulation's units
+  // The camera moved over the road: still corners vote their cells fixed to it, moving ones vote them free (a
+  // standing car with people walking past never votes). Old votes fade, so a far point that stood on a straight road
+  // is looked at again.
+  fixed_votes_ *= kFixedFade;
+  for (size_t i = 0; i < all.size(); ++i) {
+    float& v = fixed_votes_.at<float>(int(all[i].y) / kFixedCell, int(all[i].x) / kFixedCell);
+    v = all_flow[i] >= kFixedFlowPx ? std::max(0.0f, v - 2) : std::min(v + 1, 2 * float(kFixedVotes));
+  }
   out.confidence = std::clamp(inlier_share * std::min(1.0, support / 30.0), 0.0, 1.0);
   return out;
 }
