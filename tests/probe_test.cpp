@@ -1,6 +1,8 @@
 // Evaluation probes: Frechet distance and Spearman against closed forms, shapes, learning on procedural data,
 // exact resume through the CLI, the realism probe on real and procedural episodes, and bad inputs.
 #include <algorithm>
+#include <cmath>
+#include <functional>
 #include <random>
 
 #include <fmt/format.h>
@@ -9,6 +11,7 @@
 #include <opencv2/videoio.hpp>
 #include <torch/torch.h>
 
+#include "gaia/core/npy.h"
 #include "gaia/core/safetensors.h"
 #include "gaia/data/frame_set.h"
 #include "gaia/data/video_io.h"
@@ -411,6 +414,78 @@ TEST(ProbeCli, SceneProbeLearnsRecordedFootageFromItsMetadata) {
   EXPECT_NE(r.output.find("synth-s9-e00002: no labels.jsonl, and its metadata gives no weather or time_of_day"),
             std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(d / "bad" / "probe-scene.safetensors"));
+}
+
+// The dynamics probe on recorded footage whose estimated signals have gaps: windows reaching a frame without a speed
+// or curvature are left out of training and scoring (exactly those), the held-out recorded frames are scored on
+// their own ("real"), --mirror flips half of each batch with its curvature negated, and only for dynamics.
+TEST(ProbeCli, DynamicsProbeLearnsRecordedFootageWithGaps) {
+  test::TempDir d;
+  const std::string tiny = " --config " + q(test::source_dir() / "configs" / "tiny.yaml") + " --threads 1";
+  auto r = test::run_gaia("synth --episodes 4 --seconds 3 --size 32x64 --seed 9 --out " + q(d / "ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  // Two drives become recorded footage whose estimate could not read frames 20-29 and 40-44.
+  for (const std::string id : {"synth-s9-e00000", "synth-s9-e00001"}) {
+    const fs::path e = d / "ds" / "episodes" / id;
+    fs::remove(e / "labels.jsonl");
+    auto j = nlohmann::json::parse(read_file(e / "episode.json"));
+    j["source"] = "dashcam.mp4";
+    j["signals_source"] = "estimated";
+    write_file_atomic(e / "episode.json", j.dump(2));
+    auto speed = npy_read(e / "speed.npy").to_double();
+    std::vector<float> v(speed.begin(), speed.end());
+    for (int i = 20; i < 30; ++i) v[size_t(i)] = std::nanf("");
+    for (int i = 40; i < 45; ++i) v[size_t(i)] = std::nanf("");
+    npy_write(e / "speed.npy", npy_make(DType::F32, {int64_t(v.size())}, v));
+  }
+  {
+    data::Dataset ds(d / "ds");
+    auto set = data::frame_set(ds, {"synth-s9-e00000"}, 12, 0);
+    const size_t all = set.frames.size();
+    const probe::Span span{4, 4};
+    // Starts f whose frames f .. f + 12 reach 20-29 or 40-44: f in 8..29 and 28..44, i.e. 8..44 (37 starts).
+    EXPECT_EQ(probe::keep_with_signals(set, span), 37u);
+    EXPECT_EQ(set.frames.size(), all - 37);
+    for (const auto& e : set.frames) EXPECT_TRUE(e.frame < 8 || e.frame > 44) << e.frame;
+  }
+  r = test::run_gaia("data split " + q(d / "ds") + " --hold-out synth-s9-e00000 --hold-out synth-s9-e00003" + tiny);
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = test::run_gaia("probe train dynamics " + q(d / "ds") + tiny + " --mirror --steps 30 --batch-size 8 --out " +
+                     q(d / "dyn"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("examples left out: a frame of theirs has no speed or curvature"), std::string::npos)
+      << r.output;
+  r = test::run_gaia("probe eval " + q(d / "ds") + " --probe " + q(d / "dyn" / "probe-dynamics.safetensors") + tiny +
+                     " --examples 40");
+  ASSERT_EQ(r.status, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  // The held-out recorded drive and the procedural one: the recorded frames apart, fewer (its gaps are left out).
+  ASSERT_TRUE(j.contains("real")) << j;
+  const int all = j["examples"].get<int>(), real = j["real"]["examples"].get<int>();
+  EXPECT_GT(real, 0);
+  EXPECT_LT(real, all - real) << j;
+  EXPECT_TRUE(std::isfinite(j["real"]["curvature_bias_per_m"].get<double>())) << j;
+
+  r = test::run_gaia("probe train scene " + q(d / "ds") + tiny + " --mirror --steps 2 --out " + q(d / "bad"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--mirror is for the dynamics probe"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d / "bad"));
+}
+
+// Mirror image of dynamics examples: the flagged rows' frames flipped left to right and their curvature negated, the
+// others and every speed untouched.
+TEST(Probe, MirroredDynamicsExamplesTurnTheOtherWay) {
+  torch::manual_seed(5);
+  auto x = torch::rand({3, 12, 8, 10}), y = torch::tensor({{0.5f, 0.2f}, {0.7f, -0.3f}, {0.1f, 0.4f}});
+  auto mx = x.clone(), my = y.clone();
+  probe::mirror_dynamics(mx, my, {false, true, true});
+  EXPECT_TRUE(torch::equal(mx[0], x[0]));
+  EXPECT_TRUE(torch::equal(mx[1], x[1].flip({2})));
+  EXPECT_TRUE(torch::equal(mx[2].select(2, 0), x[2].select(2, 9)));
+  EXPECT_TRUE(torch::equal(my.select(1, 0), y.select(1, 0)));
+  EXPECT_FLOAT_EQ(my[0][1].item<float>(), 0.2f);
+  EXPECT_FLOAT_EQ(my[1][1].item<float>(), 0.3f);
+  EXPECT_FLOAT_EQ(my[2][1].item<float>(), -0.4f);
 }
 
 // The realism probe's augmentation: shape and range kept, the same draws for the same seed, and each example changed

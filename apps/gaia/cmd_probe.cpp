@@ -40,6 +40,9 @@ void register_probe(CLI::App& app) {
                                      "held-out frames");
     cmd->add_option("--decoded-share", o->decoded_share, "with --tokenizer: the share of each batch decoded (0..1)")
         ->needs(through);
+    cmd->add_flag("--mirror", o->mirror,
+                  "dynamics: half of each batch in mirror image with its curvature negated, so that the probe reads "
+                  "left and right alike");
     add_shared_flags(cmd, flags.get(), "run directory (checkpoint/, probe-KIND.safetensors, metrics.jsonl)",
                      WithPrecision::kNo);
     cmd->callback([=] {
@@ -52,6 +55,8 @@ void register_probe(CLI::App& app) {
       opt.out = flags->out;
       if (opt.steps < 1 || opt.batch < 1) fail("gaia probe train: --steps and --batch-size must be >= 1");
       if (opt.frames < 0) fail("gaia probe train: --frames must be >= 1, got {}", opt.frames);
+      if (opt.mirror && opt.kind != probe::ProbeKind::kDynamics)
+        fail("gaia probe train: --mirror is for the dynamics probe (the {} probe's labels have no side)", *kind);
       if (!(opt.decoded_share >= 0 && opt.decoded_share <= 1))
         fail("gaia probe train: --decoded-share must be in [0, 1], got {}", opt.decoded_share);
       std::unique_ptr<ProgressBar> bar;
@@ -101,15 +106,16 @@ void register_probe(CLI::App& app) {
       auto set = net->kind == probe::ProbeKind::kRealism
                      ? probe::footage_balanced_set(ds, data::held_out_ids(ds, c.run.seed), std::max(1, *n))
                      : data::held_out_frames(ds, c.run.seed, span.reach(), std::max(1, *n));
+      if (net->kind == probe::ProbeKind::kDynamics) probe::keep_with_signals(set, span);
       if (set.frames.empty())
         fail("{}: no held-out episode is long enough for this probe ({} frames, {} native frames from the first to "
              "the last)", *dataset, span.frames, span.reach() + 1);
       const auto y = probe::targets(net->kind, set.episodes, set.frames, span);
-      auto j = probe::score(net->kind, probe::predict(net, set, span, dev), y);
+      auto j = probe::score_by_footage(net->kind, probe::predict(net, set, span, dev), y, set);
       if (!tok_path->empty()) {
         const auto& e = set.frames[0];
         auto tok = probe::load_through(*tok_path, set.episodes.at(e.episode)->frame_bgr(e.frame), *dataset, dev);
-        j["decoded"] = probe::score(net->kind, probe::predict(net, set, span, dev, {&tok, dev}), y);
+        j["decoded"] = probe::score_by_footage(net->kind, probe::predict(net, set, span, dev, {&tok, dev}), y, set);
       }
       j["frames"] = net->frames;
       if (!flags->out.empty()) {

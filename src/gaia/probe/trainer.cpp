@@ -72,6 +72,30 @@ tokenizer::ImageTokenizer load_through(const fs::path& tokenizer, const cv::Mat&
   return tok;
 }
 
+size_t keep_with_signals(ExampleSet& s, const Span& span) {
+  const size_t before = s.frames.size();
+  s.frames.erase(std::remove_if(s.frames.begin(), s.frames.end(),
+                                [&](const Example& e) {
+                                  const auto& ep = *s.episodes.at(e.episode);
+                                  for (int64_t i = e.frame; i <= e.frame + span.reach(); ++i)
+                                    if (!std::isfinite(ep.speed(i)) || !std::isfinite(ep.curvature(i))) return true;
+                                  return false;
+                                }),
+                 s.frames.end());
+  return before - s.frames.size();
+}
+
+void mirror_dynamics(torch::Tensor& x, torch::Tensor& y, const std::vector<bool>& flip) {
+  std::vector<int64_t> rows;
+  for (size_t i = 0; i < flip.size(); ++i)
+    if (flip[i]) rows.push_back(int64_t(i));
+  if (rows.empty()) return;
+  auto idx = torch::tensor(rows, torch::kLong).to(x.device());
+  x.index_copy_(0, idx, x.index_select(0, idx).flip({3}));
+  auto c = y.select(1, 1);
+  c.index_copy_(0, idx.to(y.device()), -c.index_select(0, idx.to(y.device())));
+}
+
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
                       const std::vector<Example>& ex, const Span& span) {
   if (kind == ProbeKind::kDynamics) {
@@ -203,11 +227,12 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
   if (kind == ProbeKind::kDynamics) {
     auto ps = col(pred, 0, world::kSpeedScale), ys = col(y, 0, world::kSpeedScale);
     auto pc = col(pred, 1, world::kCurvatureScale), yc = col(y, 1, world::kCurvatureScale);
-    double mae_s = 0, mae_c = 0;
+    double mae_s = 0, mae_c = 0, bias_c = 0;
     int steer = 0, right = 0;
     for (size_t i = 0; i < ps.size(); ++i) {
       mae_s += std::abs(ps[i] - ys[i]) / double(ps.size());
       mae_c += std::abs(pc[i] - yc[i]) / double(ps.size());
+      bias_c += (pc[i] - yc[i]) / double(ps.size());
       if (std::abs(yc[i]) >= 0.002) {
         ++steer;
         right += (pc[i] > 0) == (yc[i] > 0);
@@ -215,6 +240,7 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
     }
     j["speed_mae_mps"] = mae_s;
     j["curvature_mae_per_m"] = mae_c;
+    j["curvature_bias_per_m"] = bias_c;  // + = reads more left than the drive turned
     j["speed_spearman"] = eval::spearman(ps, ys);
     j["curvature_spearman"] = eval::spearman(pc, yc);
     j["steering_sign_accuracy"] = steer ? double(right) / steer : 0.0;
@@ -243,6 +269,19 @@ nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Ten
   return j;
 }
 
+nlohmann::json score_by_footage(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& y, const ExampleSet& s) {
+  auto j = score(kind, pred, y);
+  if (kind == ProbeKind::kRealism) return j;  // its score already splits the two
+  std::vector<int64_t> real;
+  for (size_t i = 0; i < s.frames.size(); ++i)
+    if (!s.episodes.at(s.frames[i].episode)->meta().is_procedural()) real.push_back(int64_t(i));
+  if (!real.empty() && real.size() < s.frames.size()) {
+    const auto idx = torch::tensor(real, torch::kLong);
+    j["real"] = score(kind, pred.index_select(0, idx), y.index_select(0, idx));
+  }
+  return j;
+}
+
 ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
                              const std::function<void(int, int, double, const nlohmann::json&)>& on_step,
                              const std::function<void(const std::string&)>& on_note) {
@@ -259,6 +298,12 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
   // The realism probe scores its two classes on equal footing: a few real clips beside many procedural drives.
   auto val = opt.kind == ProbeKind::kRealism ? footage_balanced_set(ds, val_ids, opt.val_examples)
                                              : data::frame_set(ds, val_ids, span.reach(), opt.val_examples);
+  if (opt.kind == ProbeKind::kDynamics) {
+    const size_t dropped = keep_with_signals(train, span) + keep_with_signals(val, span);
+    if (dropped && on_note)
+      on_note(fmt::format("{} examples left out: a frame of theirs has no speed or curvature (recorded footage the "
+                          "estimate could not read)", dropped));
+  }
   const auto& train_eps = train.episodes;
   const auto& train_ex = train.frames;
   if (train_ex.empty()) fail("{}: no training frames for the {} probe", opt.dataset.string(), to_string(opt.kind));
@@ -297,8 +342,8 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
     nlohmann::json v;
     if (val.frames.empty()) return v;
     const auto y = targets(opt.kind, val.episodes, val.frames, span);
-    v = score(opt.kind, predict(net, val, span, dev), y);
-    if (through.tokenizer) v["decoded"] = score(opt.kind, predict(net, val, span, dev, through), y);
+    v = score_by_footage(opt.kind, predict(net, val, span, dev), y, val);
+    if (through.tokenizer) v["decoded"] = score_by_footage(opt.kind, predict(net, val, span, dev, through), y, val);
     return v;
   };
   net->train();
@@ -321,9 +366,15 @@ ProbeTrainResult train_probe(const Config& cfg, const ProbeTrainOptions& opt,
       for (int i = 0; i < opt.batch; ++i) decoded.push_back(coin(rng));
     }
     auto x = inputs(train_eps, b, span, through, decoded).to(dev);
-    // Flip augmentation would swap left and right, which is the label of the dynamics probe; realism has no side.
+    // Realism has no side; the dynamics probe's label is the side, so its flips negate the curvature too.
     if (opt.kind == ProbeKind::kRealism) x = realism_augment(x, rng);
     auto y = targets(opt.kind, train_eps, b, span).to(dev);
+    if (opt.kind == ProbeKind::kDynamics && opt.mirror) {
+      std::bernoulli_distribution coin(0.5);
+      std::vector<bool> flip;
+      for (size_t i = 0; i < b.size(); ++i) flip.push_back(coin(rng));
+      mirror_dynamics(x, y, flip);
+    }
     const double lr = sched(step);
     train::set_lr(*optim, lr);
     auto loss = loss_of(opt.kind, net->forward(x), y);

@@ -1,6 +1,6 @@
 #pragma once
-// `gaia probe train`: the dynamics and scene probes on a procedural-world dataset (frames with ground-truth labels),
-// the realism probe on a dataset of real and procedural episodes, with held-out evaluation on the dataset's validation episodes; resumable like every trainer here.
+// `gaia probe train`: the dynamics and scene probes on a procedural-world dataset (frames with ground-truth labels;
+// recorded footage too, with its signals or its manifest's conditions as the labels), the realism probe on a dataset of real and procedural episodes, with held-out evaluation on the dataset's validation episodes; resumable like every trainer here.
 #include <functional>
 #include <random>
 
@@ -33,6 +33,12 @@ Span span_of(const ProbeNet& net, const Config& c);
 // [N, 4] int64 class ids (weather, time, light, lead close); realism [N, 1], 1 for real footage. Errors name the episode when a label is missing.
 torch::Tensor targets(ProbeKind kind, const std::vector<std::unique_ptr<data::Episode>>& eps,
                       const std::vector<Example>& ex, const Span& span);
+// The dynamics probe's examples whose span has a speed and curvature on every native frame: recorded footage with
+// estimated actions has gaps (docs/your-drives.md). Returns how many were left out.
+size_t keep_with_signals(ExampleSet& s, const Span& span);
+// A horizontal flip of dynamics inputs [N, 3 * frames, H, W] and targets [N, 2] where `flip` is set: the same drive
+// in mirror image, turning the other way (tokenize --mirror's rule).
+void mirror_dynamics(torch::Tensor& x, torch::Tensor& y, const std::vector<bool>& flip);
 // Inputs [N, 3 * frames, H, W] of examples; with `through` (a tokenizer) the examples whose `decoded` flag is set
 // (all when `decoded` is empty) are first encoded and decoded by it, the way `gaia eval` reads generated frames.
 struct Through {
@@ -59,9 +65,14 @@ torch::Tensor realism_augment(const torch::Tensor& x, std::mt19937_64& rng);
 ExampleSet footage_balanced_set(const data::Dataset& ds, const std::vector<std::string>& ids, int n);
 
 // Metrics of predictions against targets: dynamics -> speed / curvature MAE (m/s, 1/m), Spearman, steering sign
-// accuracy (|curvature| >= 0.002 1/m); scene -> accuracy of each attribute; realism -> accuracy and the share of
+// accuracy (|curvature| >= 0.002 1/m), mean curvature error (its bias, 1/m); scene -> accuracy of each attribute; realism -> accuracy and the share of
 // real and of procedural frames read as real.
 nlohmann::json score(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& target);
+
+// score() of the whole set, and where it mixes recorded footage with procedural drives, of the recorded frames
+// alone ("real"): what a probe that learned both reads on real roads.
+nlohmann::json score_by_footage(ProbeKind kind, const torch::Tensor& pred, const torch::Tensor& target,
+                                const ExampleSet& s);
 
 struct ProbeTrainOptions {
   fs::path dataset, out;   // OUT/checkpoint/, OUT/probe-<kind>.safetensors, OUT/metrics.jsonl
@@ -74,6 +85,8 @@ struct ProbeTrainOptions {
   // streaks, for one). Validation then also scores decoded held-out frames.
   fs::path tokenizer;
   double decoded_share = 0.5;
+  // Dynamics: half of each batch in mirror image, curvature negated (a probe that learns left and right alike).
+  bool mirror = false;
 };
 
 struct ProbeTrainResult {
