@@ -203,8 +203,11 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
   {
     std::vector<cv::Point2f> ma, mb;
     std::vector<double> mflow;
+    // Left out: where most tracks stand, the still ones; else those in cells seen fixed to the camera before.
     for (size_t i = 0; i < a.size(); ++i)
-      if (flow[i] >= kFixedFlowPx) {
+      if (mostly_still ? flow[i] >= kFixedFlowPx
+                       : flow[i] >= kFixedFlowPx ||
+                             fixed_votes_.at<float>(int(a[i].y) / kFixedCell, int(a[i].x) / kFixedCell) < 1) {
         ma.push_back(a[i]);
         mb.push_back(b[i]);
         mflow.push_back(flow[i]);
