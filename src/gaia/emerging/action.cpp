@@ -6,6 +6,8 @@
 
 #include <fmt/ranges.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include "gaia/core/error.h"
 #include "gaia/data/motion.h"
 #include "gaia/eval/metrics.h"
@@ -58,14 +60,21 @@ constexpr double kStrongSteer = 0.02;
 // The generated video's own visual odometry (data/motion.h), a read-back any driving video model's output can be
 // given: the median yaw rate (rad/s, + = left) of each row's frames from `from` on, NaN where it finds no motion.
 // At the tokenizer's frame size the road plane's scale is coarse, so only the yaw rate (no scale needed) is used.
+// The estimator's windows and tolerances are in pixels, set for recorded footage (hundreds of pixels wide): the
+// tokenizer's frames are enlarged first, or its tracking window spans a sixth of the frame.
+constexpr int kEgoUpsample = 2;
 std::vector<double> ego_motion_yaw_rates(const std::vector<std::vector<cv::Mat>>& rows, int64_t from, double fps) {
   std::vector<double> out;
   for (const auto& row : rows) {
     data::CameraIntrinsics cam;
-    cam.width = row.at(size_t(from)).cols;
-    cam.height = row.at(size_t(from)).rows;
+    cam.width = row.at(size_t(from)).cols * kEgoUpsample;
+    cam.height = row.at(size_t(from)).rows * kEgoUpsample;
     data::MotionEstimator est(cam, data::MotionOptions{});
-    for (size_t k = size_t(from); k < row.size(); ++k) est.add(row[k], double(k - size_t(from)) / fps);
+    for (size_t k = size_t(from); k < row.size(); ++k) {
+      cv::Mat f;
+      cv::resize(row[k], f, cv::Size(), kEgoUpsample, kEgoUpsample, cv::INTER_CUBIC);
+      est.add(f, double(k - size_t(from)) / fps);
+    }
     std::vector<double> w;
     for (double y : est.finish().yaw_rate)
       if (std::isfinite(y)) w.push_back(y);
