@@ -205,11 +205,13 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
                     "a.avi,clear,day,city,one/a,Berlin\nb.avi,clear,day,city,two/b,Paris\nc.avi,rain,night,rural,three/c,Rome\n");
   const std::string release = "train-all --data " + q(d / "clips") + " --manifest clips.csv --from " + q(d / "models") +
                               " --synth 3 --wander-episodes 0 --swerve-episodes 0 --seconds 3 --world-cf-steps 0" + tiny +
-                              " --tokenizer-steps 3 --world-steps 2 --realism-probe-steps 2 --skip-eval"
+                              " --tokenizer-steps 3 --world-steps 2 --realism-probe-steps 2 --dynamics-probe-steps 2"
+                              " --skip-eval"
                               " --ship " + q(d / "release") + " --out " + q(d / "real");
   r = test::run_gaia(release);
   ASSERT_EQ(r.status, 0) << r.output;
-  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors", "probe-realism.safetensors"})
+  for (const char* f : {"tokenizer.safetensors", "world.safetensors", "decoder.safetensors", "probe-realism.safetensors",
+                        "probe-dynamics.safetensors"})
     EXPECT_TRUE(fs::exists(d / "release" / f)) << f;
   data::Dataset real(d / "real" / "data");
   EXPECT_EQ(real.size(), 6u);  // three clips, three procedural drives
@@ -222,6 +224,8 @@ TEST(TrainAllSlow, RunsOnYourOwnDrivesMixedWithProceduralOnes) {
   EXPECT_NE(commands.find("--distill-procedural-only"), std::string::npos) << commands;
   EXPECT_NE(commands.find("data.balance_tokenizer=[footage]"), std::string::npos) << commands;
   EXPECT_NE(commands.find("--hold-out-by source_repo,place"), std::string::npos) << commands;
+  EXPECT_NE(commands.find("probe train dynamics " + (d / "real" / "data").string() + " --steps 2 --mirror"),
+            std::string::npos) << commands;  // real roads' motion beside the procedural world's
   // The codes stayed, so the video decoder is the --from one, kept byte for byte rather than trained again.
   EXPECT_EQ(commands.find("decoder train"), std::string::npos) << commands;
   EXPECT_EQ(read_file(d / "real" / "decoder" / "decoder.safetensors"), read_file(d / "models" / "decoder.safetensors"));

@@ -410,13 +410,23 @@ void register_train_all(CLI::App& app) {
         stages.push_back({"probe-realism", with({"probe", "train", "realism", data, "--steps", std::to_string(st->probe_realism),
                                                  "--tokenizer", tk, "--decoded-share", "0.5",
                                                  "--out", (out / "probe-realism").string()}), realism});
+      // The dynamics probe learns the recorded drives' estimated motion beside the procedural world's, each example
+      // also in mirror image: one probe trained on procedural frames alone reads real roads as turning left.
+      const std::string dynamics = (out / "probe-dynamics" / "probe-dynamics.safetensors").string();
+      if (lane > 0 && recorded)
+        stages.push_back({"probe-dynamics", with({"probe", "train", "dynamics", data, "--steps",
+                                                  std::to_string(st->probe_dynamics), "--mirror", "--out",
+                                                  (out / "probe-dynamics").string()}), dynamics});
       if (!*skip_eval)
         stages.push_back({"world-eval", with({"world", "eval", tokens, "--world", world, "--out", (out / "world-eval").string()}),
                           out / "world-eval" / "eval.json"});
       if (!ship->empty()) {
         std::vector<std::pair<std::string, std::string>> files = {
             {tk, "tokenizer.safetensors"}, {world, "world.safetensors"}, {decoder, "decoder.safetensors"}};
-        if (lane > 0 && recorded) files.push_back({realism, "probe-realism.safetensors"});
+        if (lane > 0 && recorded) {
+          files.push_back({realism, "probe-realism.safetensors"});
+          files.push_back({dynamics, "probe-dynamics.safetensors"});
+        }
         for (auto& [file, to] : files)
           stages.push_back({"ship " + to, {"convert", file, "--half", "--out", (fs::path(*ship) / to).string()},
                             fs::path(*ship) / to});
