@@ -185,9 +185,9 @@ MotionEstimator::Pair MotionEstimator::measure(const cv::Mat& prev, const cv::Ma
     return out;
   }
   // Nothing moves, not even the fastest fifth of the tracks: the car stands, unless the tracks that do move show the
-  // camera going forward over the road (people walking past a standing car do not). Corners fixed to the camera (a hood, a watermark, a timestamp, raindrops on the screen)
-  // never move; where they are most of the tracks they would read as standing still and outvote the road in the
-  // essential matrix, and where the car moves they say nothing of how: the motion is measured on the moving tracks.
+  // camera going forward over the road (people walking past a standing car do not). Corners fixed to the camera (a
+  // hood, a watermark, a timestamp, raindrops on the screen) never move: where they are most of the tracks they would
+  // read as standing still and outvote the road in the essential matrix, so the geometry takes the moving tracks.
   std::vector<double> sorted = flow;
   std::sort(sorted.begin(), sorted.end());
   const bool mostly_still = sorted[sorted.size() * 4 / 5] < kStillFlowPx;
